@@ -1,0 +1,1 @@
+"""hcloth_ros: real-time hierarchical mass-spring cloth for ROS 2."""

@@ -1,0 +1,10 @@
+"""The ROS-free engine: model, state, control, solvers and their numba kernels."""
+
+from hcloth_ros.core.control import Control
+from hcloth_ros.core.model import ClothBuilder, ClothModel, Placement
+from hcloth_ros.core.scene import Scene, make_scene
+from hcloth_ros.core.solvers import SOLVERS, StepReport, make_solver, warm_up
+from hcloth_ros.core.state import State
+
+__all__ = ['ClothBuilder', 'ClothModel', 'Control', 'Placement', 'SOLVERS', 'Scene',
+           'State', 'StepReport', 'make_scene', 'make_solver', 'warm_up']

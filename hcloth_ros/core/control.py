@@ -1,0 +1,223 @@
+"""What the outside world sets: pinned points, grasps and kinematic targets.
+
+Everything is given in point ids of the finest level (see :mod:`hcloth_ros.core.model`).
+A hold is made consistent across levels here: on a level where a held id does not exist,
+its representative (the anchor chain of first parents, :meth:`ClothModel.representative`)
+is held instead, so a coarse level never drags a held fine point's neighbourhood away.
+
+* A pinned point does not move at all, bit for bit, on every level where it (or its
+  representative) is held.
+* A grasp attaches points rigidly to a frame (rotation ``R``, translation ``p``): each
+  held point keeps the coordinates it had in that frame when grasped, on every level, so
+  moving the frame carries the cloth as a whole.
+* A kinematic target drives one point to a position each step: a one-point grasp whose
+  frame is translated only.
+
+Pins win over grasps for a point that is both.
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+
+FREE = 0
+PINNED = 1
+DRIVEN = 2
+
+
+@dataclass
+class _Grasp:
+    rotation: np.ndarray        # (3, 3)
+    translation: np.ndarray     # (3,)
+    grid_index: list            # per level: int64 (m,)
+    local: list                 # per level: float64 (3, m), coordinates in the frame
+
+
+@dataclass
+class Holds:
+    """One level's resolved holds, as the kernels read them.
+
+    ``kind``: int8 ``(rows, cols)`` of FREE / PINNED / DRIVEN. ``drive_index``: flat grid
+    indices of driven points. ``drive_target``: ``(3, m)`` positions they must reach at
+    the end of the step (m).
+    """
+
+    kind: np.ndarray
+    drive_index: np.ndarray
+    drive_target: np.ndarray
+
+
+def _check_rotation(rotation):
+    r = np.asarray(rotation, dtype=np.float64)
+    if r.shape != (3, 3) or not np.all(np.isfinite(r)):
+        raise ValueError('rotation must be a finite 3x3 matrix')
+    if np.max(np.abs(r @ r.T - np.eye(3))) > 1e-6 or np.linalg.det(r) < 0:
+        raise ValueError('rotation must be orthonormal with determinant +1')
+    return r
+
+
+def _check_vector(v, what):
+    a = np.asarray(v, dtype=np.float64)
+    if a.shape != (3,) or not np.all(np.isfinite(a)):
+        raise ValueError(f'{what} must be 3 finite numbers, got {v!r}')
+    return a
+
+
+def quaternion_to_matrix(x, y, z, w):
+    """Rotation matrix of a unit quaternion (normalised here; zero length refused)."""
+    q = np.array([x, y, z, w], dtype=np.float64)
+    n = np.linalg.norm(q)
+    if not np.isfinite(n) or n < 1e-9:
+        raise ValueError(f'quaternion must be finite and non-zero, got {q.tolist()}')
+    x, y, z, w = q / n
+    return np.array([
+        [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+        [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+        [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+    ])
+
+
+class Control:
+    """Pins, grasps and targets of one cloth; create with ``Control(model)``."""
+
+    def __init__(self, model):
+        self.model = model
+        self._pins = {}
+        self._grasps = {}
+        self._version = 0
+        self._kind_cache = None
+
+    # --- validation -------------------------------------------------------------------
+    def _check_ids(self, ids):
+        arr = np.asarray(ids)
+        if arr.size and not np.issubdtype(arr.dtype, np.integer):
+            raise ValueError(f'point ids must be integers, got {arr.dtype}')
+        arr = arr.astype(np.int64).ravel()
+        bad = arr[(arr < 0) | (arr >= self.model.point_count)]
+        if bad.size:
+            raise IndexError(f'point ids {bad.tolist()[:5]} out of range '
+                             f'0..{self.model.point_count - 1}')
+        return arr
+
+    # --- pins -------------------------------------------------------------------------
+    @property
+    def pins(self):
+        return np.fromiter(self._pins, dtype=np.int64, count=len(self._pins))
+
+    def set_pins(self, ids):
+        """Replace the pinned set (ids are checked before anything changes)."""
+        arr = self._check_ids(ids)
+        self._pins = dict.fromkeys(arr.tolist())
+        self._touch()
+
+    def pin(self, ids):
+        arr = self._check_ids(ids)
+        self._pins.update(dict.fromkeys(arr.tolist()))
+        self._touch()
+
+    def unpin(self, ids):
+        for i in self._check_ids(ids).tolist():
+            self._pins.pop(i, None)
+        self._touch()
+
+    # --- grasps -----------------------------------------------------------------------
+    @property
+    def grasp_names(self):
+        return list(self._grasps)
+
+    def grasp(self, name, ids, state, rotation=np.eye(3), translation=(0, 0, 0)):
+        """Attach ``ids`` rigidly to a frame whose pose is ``(rotation, translation)`` now.
+
+        Re-grasping an existing name replaces it.
+        """
+        arr = self._check_ids(ids)
+        if arr.size == 0:
+            raise ValueError(f'grasp {name!r} needs at least one point')
+        r = _check_rotation(rotation)
+        p = _check_vector(translation, 'translation')
+        grid_index, local = [], []
+        for k in range(self.model.level_count):
+            reps = np.unique([self.model.representative(i, k) for i in arr.tolist()])
+            g = self.model.level(k).id_to_grid[reps]
+            x = state.q[k].reshape(3, -1)[:, g]
+            grid_index.append(np.ascontiguousarray(g))
+            local.append(np.ascontiguousarray(r.T @ (x - p[:, None])))
+        self._grasps[name] = _Grasp(r, p, grid_index, local)
+        self._touch()
+
+    def move_grasp(self, name, rotation, translation):
+        """Set a grasp frame's pose; its points follow rigidly from the next step."""
+        if name not in self._grasps:
+            raise KeyError(f'no grasp named {name!r} (have {self.grasp_names})')
+        g = self._grasps[name]
+        g.rotation = _check_rotation(rotation)
+        g.translation = _check_vector(translation, 'translation')
+
+    def release(self, name):
+        if self._grasps.pop(name, None) is not None:
+            self._touch()
+
+    def release_all(self):
+        self._grasps.clear()
+        self._touch()
+
+    def grasped_ids(self, name):
+        """Finest-level grid indices held by a grasp (for display)."""
+        return self._grasps[name].grid_index[-1].copy()
+
+    # --- kinematic targets ------------------------------------------------------------
+    def set_target(self, point_id, position, state):
+        """Drive one point to ``position`` (m) from the next step on."""
+        pos = _check_vector(position, 'target position')
+        pid = int(self._check_ids([point_id])[0])
+        name = ('target', pid)
+        if name not in self._grasps:
+            here = state.position_of(self.model, pid, self.model.level_count - 1)
+            self.grasp(name, [pid], state, np.eye(3), here)
+        self.move_grasp(name, np.eye(3), pos)
+
+    def clear_target(self, point_id):
+        self.release(('target', int(point_id)))
+
+    # --- resolution ---------------------------------------------------------------------
+    def _touch(self):
+        self._version += 1
+        self._kind_cache = None
+
+    def _kinds(self):
+        """Per-level hold kinds; recomputed only when pins or grasps change."""
+        if self._kind_cache is not None:
+            return self._kind_cache
+        model = self.model
+        kinds, drive = [], []
+        for k in range(model.level_count):
+            lv = model.level(k)
+            kind = np.zeros(lv.rows * lv.cols, dtype=np.int8)
+            sources = []
+            for name, g in self._grasps.items():
+                kind[g.grid_index[k]] = DRIVEN
+                sources.append(name)
+            pinned = [model.representative(i, k) for i in self._pins]
+            kind[lv.id_to_grid[np.asarray(pinned, dtype=np.int64)]] = PINNED
+            kinds.append(kind.reshape(lv.rows, lv.cols))
+            drive.append(sources)
+        self._kind_cache = kinds
+        return kinds
+
+    def holds(self, k):
+        """Resolve level k's holds for the coming step (targets from current frames)."""
+        kind = self._kinds()[k]
+        flat = kind.ravel()
+        index, target = [], []
+        for g in self._grasps.values():
+            gi = g.grid_index[k]
+            keep = flat[gi] == DRIVEN    # a pin on the same point wins
+            index.append(gi[keep])
+            target.append(g.rotation @ g.local[k][:, keep] + g.translation[:, None])
+        if index:
+            idx = np.concatenate(index)
+            tgt = np.ascontiguousarray(np.concatenate(target, axis=1))
+        else:
+            idx = np.zeros(0, dtype=np.int64)
+            tgt = np.zeros((3, 0))
+        return Holds(kind, idx, tgt)

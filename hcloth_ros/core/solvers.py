@@ -1,0 +1,375 @@
+"""Solvers: one ``step(state, control, dt)`` per method, selectable by name.
+
+=================  ==================================================================
+``explicit``       symplectic Euler on one level: the baseline that blows up at large
+                   steps (stable below about ``2 / sqrt(max eigenvalue of M^-1 K)``).
+``approx``         the paper's eq. 6 (two Jacobi sweeps of linearised backward Euler
+                   with the diagonal Jacobian approximation) on one level.
+``hierarchical``   the paper's Table 1: eq. 6 on level 0, then for each finer level
+                   the constraint C (inherited points follow) and eq. 7 on new points.
+``implicit``       backward Euler solved by Newton iterations with preconditioned CG on
+                   the full spring Jacobian (Baraff and Witkin 1998): the reference.
+=================  ==================================================================
+
+External forces (gravity), option ``external``:
+
+* ``'exact'`` (default): gravity is applied outside the filter, so a free point gains
+  exactly ``h g`` per step and the centre of mass of a free cloth falls at exactly g; eq. 7
+  removes ``h g`` from each neighbour's estimated change so it is counted once.
+* ``'literal'``: gravity is part of ``f~`` and goes through the filter, as the paper
+  writes it. A stiff or fine mesh then falls far slower than g (paper section III).
+
+Every solver can limit strain (Provot 1995), pushes points out of the scene's obstacles,
+and refuses a step that is non-finite or stretches a spring beyond ``blowup_strain``: the
+state keeps its last good value and the report says why.
+"""
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from hcloth_ros.core import kernels
+from hcloth_ros.core.control import FREE
+
+EXTERNAL_MODES = ('exact', 'literal')
+
+
+@dataclass
+class StepReport:
+    """What one call to ``step`` did.
+
+    ``ok`` is False when the step was refused (``reason`` says why) and the state was left
+    as it was. ``max_strain``/``mean_strain`` are relative stretch of structural and shear
+    springs on the finest simulated level after the step (0.1 = 10 %).
+    """
+
+    ok: bool
+    reason: str = ''
+    max_strain: float = 0.0
+    mean_strain: float = 0.0
+    levels: tuple = ()
+    seconds: float = 0.0
+    newton_iterations: int = 0
+    cg_iterations: int = 0
+    converged: bool = True
+    extra: dict = field(default_factory=dict)
+
+
+class Solver:
+    """Shared machinery: buffers, holds, post-processing, blow-up check and commit.
+
+    Args:
+        model: the :class:`ClothModel`.
+        external: ``'exact'`` or ``'literal'`` (see the module docstring).
+        strain_limit: largest stretch kept by strain limiting (0.1 = 10 %), or None to
+            switch it off.
+        strain_iterations: Jacobi sweeps of strain limiting per level and step.
+        blowup_strain: a step that leaves a spring stretched beyond this (relative) or
+            any value non-finite is refused.
+    """
+
+    name = ''
+
+    def __init__(self, model, external='exact', strain_limit=0.1, strain_iterations=4,
+                 blowup_strain=10.0):
+        if external not in EXTERNAL_MODES:
+            raise ValueError(f'external must be one of {EXTERNAL_MODES}, got {external!r}')
+        if strain_limit is not None and not (0.0 < strain_limit < 10.0):
+            raise ValueError(f'strain_limit must be in (0, 10) or None, got {strain_limit}')
+        if not (1 <= int(strain_iterations) <= 1000):
+            raise ValueError(f'strain_iterations must be in 1..1000, got {strain_iterations}')
+        if not (blowup_strain > 0):
+            raise ValueError(f'blowup_strain must be positive, got {blowup_strain}')
+        self.model = model
+        self.literal = external == 'literal'
+        self.external = external
+        self.strain_limit = strain_limit
+        self.strain_iterations = int(strain_iterations)
+        self.blowup_strain = float(blowup_strain)
+        shapes = [(3, lv.rows, lv.cols) for lv in model.levels]
+        self._q = [np.zeros(s) for s in shapes]
+        self._qd = [np.zeros(s) for s in shapes]
+        self._dv = [np.zeros(s) for s in shapes]
+        self._presc = [np.zeros(s) for s in shapes]
+        self._scratch = [np.zeros(s) for s in shapes]
+        self._a = [np.zeros(s) for s in shapes]
+        self._dinv = {}
+
+    # --- what subclasses provide ---------------------------------------------------------
+    def levels(self):
+        """Levels this solver integrates, coarse to fine."""
+        raise NotImplementedError
+
+    def _integrate(self, k, state, holds, h):
+        """Write level k's new state into ``self._q/_qd/_dv[k]``."""
+        raise NotImplementedError
+
+    # --- shared --------------------------------------------------------------------------
+    def dinv(self, k, h):
+        """``1 / (m_i + h^2 K_i)`` of level k, cached per step size."""
+        key = (k, h)
+        if key not in self._dinv:
+            lv = self.model.level(k)
+            self._dinv[key] = 1.0 / (lv.mass + h * h * lv.stiffness_sum)
+        return self._dinv[key]
+
+    def _prescribe(self, k, state, holds, h):
+        kernels.prescribe(state.q[k], state.qd[k], holds.kind, holds.drive_index,
+                          holds.drive_target, h, self._presc[k])
+
+    def _post(self, k, holds, h, inherited_fixed):
+        """Strain limiting, then contact: no point ends the step inside an obstacle."""
+        lv = self.model.level(k)
+        if self.strain_limit is not None:
+            kernels.strain_limit(self._q[k], self._qd[k], self._dv[k], lv.rest, holds.kind,
+                                 inherited_fixed, self.strain_limit, self.strain_iterations,
+                                 h, self._scratch[k])
+        scene = self.model.scene
+        if scene is not None and not scene.empty:
+            kernels.contact(self._q[k], self._qd[k], self._dv[k], holds.kind,
+                            inherited_fixed, scene.planes, scene.boxes, scene.spheres,
+                            scene.friction, scene.margin)
+
+    def step(self, state, control, dt):
+        """Advance ``state`` by ``dt`` seconds under ``control``; return a StepReport."""
+        start = time.perf_counter()
+        if not (np.isfinite(dt) and 0.0 < dt <= 1.0):
+            return StepReport(False, f'dt must be in (0, 1] s, got {dt}')
+        h = float(dt)
+        levels = self.levels()
+        self._extra = {}
+        for k in levels:
+            holds = control.holds(k)
+            self._prescribe(k, state, holds, h)
+            self._integrate(k, state, holds, h)
+        report = self._check(levels)
+        if report.ok:
+            for k in levels:
+                state.q[k], self._q[k] = self._q[k], state.q[k]
+                state.qd[k], self._qd[k] = self._qd[k], state.qd[k]
+            state.time += h
+        report.seconds = time.perf_counter() - start
+        report.extra.update(self._extra)
+        return report
+
+    def _check(self, levels):
+        worst = 0.0
+        mean = 0.0
+        for k in levels:
+            mx, mean, finite = kernels.strain_stats(self._q[k], self._qd[k],
+                                                    self.model.level(k).rest)
+            if not finite:
+                return StepReport(False, f'non-finite state on level {k}: step refused, '
+                                  'last good state kept', levels=tuple(levels))
+            if mx > self.blowup_strain:
+                return StepReport(False, f'runaway strain {mx:.3g} > {self.blowup_strain:g} '
+                                  f'on level {k}: step refused, last good state kept',
+                                  max_strain=mx, levels=tuple(levels))
+            worst = mx
+        return StepReport(True, max_strain=worst, mean_strain=mean, levels=tuple(levels))
+
+
+class _SingleLevel(Solver):
+    def __init__(self, model, level=None, **options):
+        super().__init__(model, **options)
+        self.level = model.level_count - 1 if level is None else int(level)
+        model.level(self.level)     # range check
+
+    def levels(self):
+        return [self.level]
+
+
+class ExplicitSolver(_SingleLevel):
+    """Symplectic Euler on one level."""
+
+    name = 'explicit'
+
+    def _integrate(self, k, state, holds, h):
+        lv = self.model.level(k)
+        kernels.explicit_step(state.q[k], state.qd[k], lv.mass, lv.rest, lv.stiffness,
+                              lv.contraction, holds.kind, self._presc[k], h,
+                              self.model.gravity, self._q[k], self._qd[k], self._dv[k])
+        self._post(k, holds, h, False)
+
+
+class ApproxSolver(_SingleLevel):
+    """The paper's eq. 6 on one level."""
+
+    name = 'approx'
+
+    def _integrate(self, k, state, holds, h):
+        _eq6(self, k, state, holds, h)
+        self._post(k, holds, h, False)
+
+
+def _eq6(solver, k, state, holds, h):
+    lv = solver.model.level(k)
+    ft, a = solver._scratch[k], solver._a[k]
+    kernels.eq6_first_sweep(state.q[k], state.qd[k], lv.mass, lv.rest, lv.stiffness,
+                            lv.contraction, solver.dinv(k, h), holds.kind, solver._presc[k],
+                            h, solver.model.gravity, solver.literal, ft, a)
+    kernels.eq6_second_sweep(state.q[k], state.qd[k], lv.stiffness, solver.dinv(k, h),
+                             holds.kind, solver._presc[k], ft, a, h, solver.model.gravity,
+                             solver.literal, solver._q[k], solver._qd[k], solver._dv[k])
+
+
+class HierarchicalSolver(Solver):
+    """The paper's Table 1 over levels ``0 .. finest_level``.
+
+    ``finest_level`` may change between steps; a level simulated again after a pause
+    must be restarted from the coarser state first (:func:`prolong_state`).
+    """
+
+    name = 'hierarchical'
+
+    def __init__(self, model, finest_level=None, **options):
+        super().__init__(model, **options)
+        self.finest_level = model.level_count - 1 if finest_level is None else finest_level
+        self._dv_app = [np.zeros_like(x) for x in self._q]
+
+    @property
+    def finest_level(self):
+        return self._finest
+
+    @finest_level.setter
+    def finest_level(self, k):
+        self.model.level(int(k))
+        self._finest = int(k)
+
+    def levels(self):
+        return list(range(self._finest + 1))
+
+    def _integrate(self, k, state, holds, h):
+        if k == 0:
+            _eq6(self, 0, state, holds, h)
+            self._post(0, holds, h, False)
+            return
+        lv = self.model.level(k)
+        kernels.prolong(self._dv[k - 1], self._dv_app[k])
+        kernels.eq7_level(state.q[k], state.qd[k], lv.mass, lv.rest, lv.stiffness,
+                          lv.contraction, self.dinv(k, h), holds.kind, self._presc[k], h,
+                          self.model.gravity, self.literal, self._q[k - 1], self._qd[k - 1],
+                          self._dv[k - 1], self._dv_app[k], self._q[k], self._qd[k],
+                          self._dv[k])
+        self._post(k, holds, h, True)
+
+
+class ImplicitSolver(_SingleLevel):
+    """Backward Euler on one level, solved to a tolerance: the converged reference.
+
+    Each Newton iteration solves ``(M - h^2 J(x + h v+)) dv = -R(v+)`` for the residual
+    ``R(v+) = M (v+ - v) - h f(x + h v+) - h M g`` by CG, until the largest position
+    change of an iteration, ``h |dv|_inf``, is below ``tolerance`` (m) or
+    ``max_newton`` iterations have run (the report's ``converged`` says which).
+    """
+
+    name = 'implicit'
+
+    def __init__(self, model, level=None, tolerance=1e-6, max_newton=20, cg_rtol=1e-6,
+                 cg_max_iter=2000, **options):
+        super().__init__(model, level=level, **options)
+        if not (0 < tolerance < 1):
+            raise ValueError(f'tolerance must be in (0, 1) m, got {tolerance}')
+        if not (1 <= max_newton <= 1000 and 1 <= cg_max_iter <= 100000):
+            raise ValueError('max_newton must be in 1..1000 and cg_max_iter in 1..100000')
+        if not (0 < cg_rtol < 1):
+            raise ValueError(f'cg_rtol must be in (0, 1), got {cg_rtol}')
+        self.tolerance = float(tolerance)
+        self.max_newton = int(max_newton)
+        self.cg_rtol = float(cg_rtol)
+        self.cg_max_iter = int(cg_max_iter)
+        shape = self._q[self.level].shape
+        self._work = [np.zeros(shape) for _ in range(8)]
+
+    def _integrate(self, k, state, holds, h):
+        lv = self.model.level(k)
+        q, qd = state.q[k], state.qd[k]
+        f, rhs, delta, diag, r, z, p, ap = self._work
+        free = (holds.kind == FREE).astype(np.float64)
+        g = self.model.gravity[:, None, None]
+        v_plus = self._qd[k]
+        # explicit gravity as the first guess; held points get their prescribed velocity
+        np.copyto(v_plus, np.where(free[None] > 0, qd + h * g, qd + self._presc[k]))
+        x_eval = self._q[k]
+        newton = cg_total = 0
+        converged = False
+        for newton in range(1, self.max_newton + 1):
+            np.multiply(v_plus, h, out=x_eval)
+            x_eval += q
+            kernels.spring_forces(x_eval, lv.rest, lv.stiffness, lv.contraction, f)
+            # rhs = -R on free points, zero on held ones
+            np.subtract(v_plus, qd, out=rhs)
+            rhs *= -lv.mass
+            rhs += h * f
+            rhs += (h * lv.mass) * g
+            rhs *= free
+            kernels.system_diagonal(x_eval, lv.rest, lv.stiffness, lv.contraction, lv.mass,
+                                    free, h, diag)
+            iters, _ = kernels.conjugate_gradient(x_eval, lv.rest, lv.stiffness,
+                                                  lv.contraction, lv.mass, free, h, rhs,
+                                                  delta, diag, self.cg_rtol,
+                                                  self.cg_max_iter, r, z, p, ap)
+            cg_total += iters
+            v_plus += delta
+            if h * np.max(np.abs(delta)) < self.tolerance:
+                converged = True
+                break
+        np.multiply(v_plus, h, out=x_eval)
+        x_eval += q
+        np.subtract(v_plus, qd, out=self._dv[k])
+        self._extra = dict(newton_iterations=newton, cg_iterations=cg_total,
+                           converged=converged)
+        self._post(k, holds, h, False)
+
+    def step(self, state, control, dt):
+        report = super().step(state, control, dt)
+        report.newton_iterations = report.extra.get('newton_iterations', 0)
+        report.cg_iterations = report.extra.get('cg_iterations', 0)
+        report.converged = report.extra.get('converged', True)
+        return report
+
+
+SOLVERS = {cls.name: cls for cls in
+           (ExplicitSolver, ApproxSolver, HierarchicalSolver, ImplicitSolver)}
+
+
+def make_solver(name, model, **options):
+    """Build the solver called ``name`` (one of :data:`SOLVERS`)."""
+    if name not in SOLVERS:
+        raise ValueError(f'unknown solver {name!r}; choose one of {sorted(SOLVERS)}')
+    return SOLVERS[name](model, **options)
+
+
+def prolong_state(state, k):
+    """Restart level k from level k-1's state (positions and velocities, no jump)."""
+    kernels.prolong(state.q[k - 1], state.q[k])
+    kernels.prolong(state.qd[k - 1], state.qd[k])
+
+
+def warm_up():
+    """Compile every kernel on a tiny cloth; returns the seconds it took.
+
+    With the on-disk cache this mostly loads machine code; the first run on a machine
+    compiles (tens of seconds).
+    """
+    from hcloth_ros.core.control import Control
+    from hcloth_ros.core.model import ClothBuilder
+    from hcloth_ros.core.scene import make_scene
+    from hcloth_ros.core.state import State
+    start = time.perf_counter()
+    scene = make_scene(ground_z=0.0, boxes=[(0, 0, -1, 1, 1, 1)], spheres=[(0, 0, -1, 0.5)])
+    model = ClothBuilder(resolution=(3, 3), level_count=2, scene=scene).finalize()
+    for name in SOLVERS:
+        for external in EXTERNAL_MODES:
+            state = State.at_rest(model)
+            control = Control(model)
+            control.pin([0])
+            control.set_target(2, (1.0, 0.0, 1.0), state)
+            solver = make_solver(name, model, external=external)
+            solver.step(state, control, 1e-3)
+            lv = model.level(0)
+            kernels.energy(state.q[0], state.qd[0], lv.mass, lv.rest, lv.stiffness,
+                           lv.contraction, model.gravity)
+    prolong_state(State.at_rest(model), 1)
+    return time.perf_counter() - start

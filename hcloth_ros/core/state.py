@@ -1,0 +1,47 @@
+"""Time-varying cloth state: positions and velocities of every level."""
+
+import numpy as np
+
+
+class State:
+    """Positions ``q[k]`` and velocities ``qd[k]`` of each level k.
+
+    Each is a C-contiguous float64 array of shape ``(3, rows, cols)`` (structure of
+    arrays: x, y and z planes), in metres and metres per second, grid order. ``time`` is
+    the simulated time in seconds.
+    """
+
+    def __init__(self, q, qd, time=0.0):
+        self.q = list(q)
+        self.qd = list(qd)
+        self.time = float(time)
+
+    @classmethod
+    def at_rest(cls, model):
+        """The model's rest rectangle with zero velocity at every level."""
+        q = [model.rest_positions(k) for k in range(model.level_count)]
+        return cls(q, [np.zeros_like(a) for a in q])
+
+    def copy(self):
+        return State([a.copy() for a in self.q], [a.copy() for a in self.qd], self.time)
+
+    def assign(self, other):
+        """Copy ``other``'s values into this state's arrays."""
+        for dst, src in zip(self.q + self.qd, other.q + other.qd):
+            np.copyto(dst, src)
+        self.time = other.time
+
+    def points(self, k):
+        """Level k positions as ``(rows * cols, 3)`` in grid order (a copy)."""
+        return self.q[k].reshape(3, -1).T.copy()
+
+    def velocities(self, k):
+        return self.qd[k].reshape(3, -1).T.copy()
+
+    def points_by_id(self, model, k):
+        """Level k positions as ``(n_k, 3)`` in point-id order: row i is id i."""
+        return self.points(k)[model.level(k).id_to_grid]
+
+    def position_of(self, model, point_id, k):
+        g = model.grid_index(point_id, k)
+        return self.q[k].reshape(3, -1)[:, g].copy()

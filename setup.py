@@ -1,0 +1,31 @@
+from glob import glob
+
+from setuptools import find_packages, setup
+
+package_name = 'hcloth_ros'
+
+setup(
+    name=package_name,
+    version='0.1.0',
+    packages=find_packages(exclude=['test']),
+    data_files=[
+        ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
+        ('share/' + package_name, ['package.xml']),
+        ('share/' + package_name + '/config', glob('config/*.yaml')),
+    ],
+    install_requires=['setuptools', 'numpy', 'numba', 'pyyaml', 'matplotlib'],
+    zip_safe=True,
+    maintainer='hcloth_ros maintainers',
+    maintainer_email='maintainers@hcloth-ros.dev',
+    description='Real-time hierarchical mass-spring cloth simulation for ROS 2.',
+    license='Apache-2.0',
+    extras_require={
+        'test': ['pytest'],
+    },
+    entry_points={
+        'console_scripts': [
+            'hcloth_demo = hcloth_ros.demo:main',
+            'hcloth_engine_bench = hcloth_ros.bench_engine:main',
+        ],
+    },
+)
