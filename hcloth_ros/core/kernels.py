@@ -279,20 +279,23 @@ def _movable(kind, r, c, inherited_fixed):
 
 
 @numba.njit(**PJIT)
-def strain_limit(q, qd, dv, rest, kind, inherited_fixed, max_stretch, iterations, h,
-                 corr):
+def strain_limit(q, qd, dv, rest, kind, inherited_fixed, max_stretch, max_iterations,
+                 tolerance, h, corr):
     """Provot-style strain limiting by Jacobi sweeps over structural and shear springs.
 
     A spring longer than ``(1 + max_stretch) * rest`` pulls its movable ends back towards
     each other (all of the excess onto a movable end whose partner is fixed, half each
     when both move); each point applies the mean of its corrections. Velocities take the
     same change divided by ``h`` so that motion stays consistent with positions.
-    ``inherited_fixed``: on a refinement level, inherited points belong to the coarser
-    level and do not move here.
+    Sweeps stop once no spring exceeds its limit by more than ``tolerance`` (relative) or
+    after ``max_iterations``; returns the sweeps applied. ``inherited_fixed``: on a
+    refinement level, inherited points belong to the coarser level and do not move here.
     """
     rows, cols = kind.shape
-    for _ in range(iterations):
+    row_excess = np.zeros(rows)
+    for it in range(max_iterations):
         for r in prange(rows):
+            worst = 0.0
             for c in range(cols):
                 corr[0, r, c] = 0.0
                 corr[1, r, c] = 0.0
@@ -315,6 +318,7 @@ def strain_limit(q, qd, dv, rest, kind, inherited_fixed, max_stretch, iterations
                     limit = (1.0 + max_stretch) * rest[s]
                     if length <= limit:
                         continue
+                    worst = max(worst, length / limit - 1.0)
                     share = 0.5 if _movable(kind, rr, cc, inherited_fixed) else 1.0
                     f = share * (length - limit) / length
                     cx += f * dx
@@ -325,6 +329,9 @@ def strain_limit(q, qd, dv, rest, kind, inherited_fixed, max_stretch, iterations
                     corr[0, r, c] = cx / n
                     corr[1, r, c] = cy / n
                     corr[2, r, c] = cz / n
+            row_excess[r] = worst
+        if row_excess.max() <= tolerance:
+            return it
         for r in prange(rows):
             for c in range(cols):
                 for d in range(3):
@@ -333,6 +340,7 @@ def strain_limit(q, qd, dv, rest, kind, inherited_fixed, max_stretch, iterations
                         q[d, r, c] += x
                         qd[d, r, c] += x / h
                         dv[d, r, c] += x / h
+    return max_iterations
 
 
 @numba.njit(**JIT)
@@ -367,8 +375,11 @@ def _resolve_contact(q, qd, dv, r, c, nx, ny, nz, depth, friction):
 
 
 @numba.njit(**PJIT)
-def contact(q, qd, dv, kind, inherited_fixed, planes, boxes, spheres, friction, margin):
-    """Push movable points out of static obstacles (see :mod:`hcloth_ros.core.scene`)."""
+def contact(q, qd, dv, q_prev, kind, inherited_fixed, planes, boxes, spheres, friction, margin):
+    """Push movable points out of static obstacles (see :mod:`hcloth_ros.core.scene`).
+
+    ``q_prev``: positions at the start of the step (to tell which face a point entered
+    a box by)."""
     rows, cols = kind.shape
     for r in prange(rows):
         for c in range(cols):
@@ -380,23 +391,43 @@ def contact(q, qd, dv, kind, inherited_fixed, planes, boxes, spheres, friction, 
                 if dist < 0.0:
                     _resolve_contact(q, qd, dv, r, c, nx, ny, nz, -dist, friction)
             for b in range(boxes.shape[0]):
+                # Leave through the face the point entered by: the axis on which its
+                # start-of-step position was furthest outside (nearest face if it was
+                # already inside). Nearest-face alone pushes points that fall onto a
+                # table top near its edge out sideways, tearing the cloth there.
                 best = 1e300
                 axis = -1
-                sign = 0.0
+                entry = -1e300
+                inside = True
                 for d in range(3):
                     rel = q[d, r, c] - boxes[b, d]
                     pen = boxes[b, 3 + d] + margin - abs(rel)
                     if pen <= 0.0:
-                        axis = -2
+                        inside = False
                         break
-                    if pen < best:
-                        best = pen
+                    outside_before = abs(q_prev[d, r, c] - boxes[b, d]) - boxes[b, 3 + d] \
+                        - margin
+                    if outside_before > entry:
+                        entry = outside_before
                         axis = d
-                        sign = 1.0 if rel >= 0.0 else -1.0
-                if axis >= 0:
-                    n = np.zeros(3)
-                    n[axis] = sign
-                    _resolve_contact(q, qd, dv, r, c, n[0], n[1], n[2], best, friction)
+                    if entry <= 0.0 and pen < best:
+                        best = pen
+                if not inside:
+                    continue
+                if entry <= 0.0:
+                    axis = 0
+                    best = 1e300
+                    for d in range(3):
+                        pen = boxes[b, 3 + d] + margin - abs(q[d, r, c] - boxes[b, d])
+                        if pen < best:
+                            best = pen
+                            axis = d
+                rel = q[axis, r, c] - boxes[b, axis]
+                sign = 1.0 if (q_prev[axis, r, c] - boxes[b, axis]) >= 0.0 else -1.0
+                depth = boxes[b, 3 + axis] + margin - sign * rel
+                _resolve_contact(q, qd, dv, r, c, sign if axis == 0 else 0.0,
+                                 sign if axis == 1 else 0.0, sign if axis == 2 else 0.0,
+                                 depth, friction)
             for s in range(spheres.shape[0]):
                 dx = q[0, r, c] - spheres[s, 0]
                 dy = q[1, r, c] - spheres[s, 1]

@@ -64,21 +64,25 @@ class Solver:
         external: ``'exact'`` or ``'literal'`` (see the module docstring).
         strain_limit: largest stretch kept by strain limiting (0.1 = 10 %), or None to
             switch it off.
-        strain_iterations: Jacobi sweeps of strain limiting per level and step.
+        strain_iterations: most Jacobi sweeps of strain limiting per level and step.
+        strain_tolerance: sweeps stop once no spring exceeds the limit by more than this
+            (relative to the limit).
         blowup_strain: a step that leaves a spring stretched beyond this (relative) or
             any value non-finite is refused.
     """
 
     name = ''
 
-    def __init__(self, model, external='exact', strain_limit=0.1, strain_iterations=4,
-                 blowup_strain=10.0):
+    def __init__(self, model, external='exact', strain_limit=0.1, strain_iterations=100,
+                 strain_tolerance=0.005, blowup_strain=10.0):
         if external not in EXTERNAL_MODES:
             raise ValueError(f'external must be one of {EXTERNAL_MODES}, got {external!r}')
         if strain_limit is not None and not (0.0 < strain_limit < 10.0):
             raise ValueError(f'strain_limit must be in (0, 10) or None, got {strain_limit}')
         if not (1 <= int(strain_iterations) <= 1000):
             raise ValueError(f'strain_iterations must be in 1..1000, got {strain_iterations}')
+        if not (0.0 < strain_tolerance < 1.0):
+            raise ValueError(f'strain_tolerance must be in (0, 1), got {strain_tolerance}')
         if not (blowup_strain > 0):
             raise ValueError(f'blowup_strain must be positive, got {blowup_strain}')
         self.model = model
@@ -86,6 +90,7 @@ class Solver:
         self.external = external
         self.strain_limit = strain_limit
         self.strain_iterations = int(strain_iterations)
+        self.strain_tolerance = float(strain_tolerance)
         self.blowup_strain = float(blowup_strain)
         shapes = [(3, lv.rows, lv.cols) for lv in model.levels]
         self._q = [np.zeros(s) for s in shapes]
@@ -118,16 +123,18 @@ class Solver:
         kernels.prescribe(state.q[k], state.qd[k], holds.kind, holds.drive_index,
                           holds.drive_target, h, self._presc[k])
 
-    def _post(self, k, holds, h, inherited_fixed):
+    def _post(self, k, state, holds, h, inherited_fixed):
         """Strain limiting, then contact: no point ends the step inside an obstacle."""
         lv = self.model.level(k)
         if self.strain_limit is not None:
-            kernels.strain_limit(self._q[k], self._qd[k], self._dv[k], lv.rest, holds.kind,
-                                 inherited_fixed, self.strain_limit, self.strain_iterations,
-                                 h, self._scratch[k])
+            sweeps = kernels.strain_limit(self._q[k], self._qd[k], self._dv[k], lv.rest,
+                                          holds.kind, inherited_fixed, self.strain_limit,
+                                          self.strain_iterations, self.strain_tolerance, h,
+                                          self._scratch[k])
+            self._extra[f'strain_sweeps_{k}'] = sweeps
         scene = self.model.scene
         if scene is not None and not scene.empty:
-            kernels.contact(self._q[k], self._qd[k], self._dv[k], holds.kind,
+            kernels.contact(self._q[k], self._qd[k], self._dv[k], state.q[k], holds.kind,
                             inherited_fixed, scene.planes, scene.boxes, scene.spheres,
                             scene.friction, scene.margin)
 
@@ -190,7 +197,7 @@ class ExplicitSolver(_SingleLevel):
         kernels.explicit_step(state.q[k], state.qd[k], lv.mass, lv.rest, lv.stiffness,
                               lv.contraction, holds.kind, self._presc[k], h,
                               self.model.gravity, self._q[k], self._qd[k], self._dv[k])
-        self._post(k, holds, h, False)
+        self._post(k, state, holds, h, False)
 
 
 class ApproxSolver(_SingleLevel):
@@ -200,7 +207,7 @@ class ApproxSolver(_SingleLevel):
 
     def _integrate(self, k, state, holds, h):
         _eq6(self, k, state, holds, h)
-        self._post(k, holds, h, False)
+        self._post(k, state, holds, h, False)
 
 
 def _eq6(solver, k, state, holds, h):
@@ -243,7 +250,7 @@ class HierarchicalSolver(Solver):
     def _integrate(self, k, state, holds, h):
         if k == 0:
             _eq6(self, 0, state, holds, h)
-            self._post(0, holds, h, False)
+            self._post(0, state, holds, h, False)
             return
         lv = self.model.level(k)
         kernels.prolong(self._dv[k - 1], self._dv_app[k])
@@ -252,7 +259,7 @@ class HierarchicalSolver(Solver):
                           self.model.gravity, self.literal, self._q[k - 1], self._qd[k - 1],
                           self._dv[k - 1], self._dv_app[k], self._q[k], self._qd[k],
                           self._dv[k])
-        self._post(k, holds, h, True)
+        self._post(k, state, holds, h, True)
 
 
 class ImplicitSolver(_SingleLevel):
@@ -320,7 +327,7 @@ class ImplicitSolver(_SingleLevel):
         np.subtract(v_plus, qd, out=self._dv[k])
         self._extra = dict(newton_iterations=newton, cg_iterations=cg_total,
                            converged=converged)
-        self._post(k, holds, h, False)
+        self._post(k, state, holds, h, False)
 
     def step(self, state, control, dt):
         report = super().step(state, control, dt)
