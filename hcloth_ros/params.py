@@ -1,0 +1,150 @@
+"""The scene parameters: one table that the node declares, the README documents and the
+engine tools read from the same YAML files in ``config/``.
+
+A parameter file has the ROS 2 layout (``<node name or /**>: ros__parameters: ...``);
+nested keys become dotted names (``cloth: {width: 1.0}`` is ``cloth.width``).
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+import yaml
+
+from hcloth_ros.core import ClothBuilder, Control, Placement, State, make_scene, make_solver
+
+
+@dataclass(frozen=True)
+class Param:
+    name: str
+    default: object
+    description: str
+    low: float = None
+    high: float = None
+    read_only: bool = True
+
+
+PARAMS = [
+    Param('cloth.width', 1.0, 'cloth size along axis_u (m)', 0.01, 100.0),
+    Param('cloth.height', 1.0, 'cloth size along axis_v (m)', 0.01, 100.0),
+    Param('cloth.resolution', [9, 9], 'level-0 points along u and v (each >= 2)', 2, 1025),
+    Param('cloth.levels', 4, 'number of hierarchy levels (finest has '
+          '2^(levels-1) (n0-1)+1 points a side)', 1, 10),
+    Param('cloth.mass', 0.2, 'total cloth mass (kg)', 1e-6, 1e3),
+    Param('cloth.k_struct', 1000.0, 'structural spring stiffness (N/m)', 1e-3, 1e9),
+    Param('cloth.k_shear', 1000.0, 'shear spring stiffness (N/m)', 0.0, 1e9),
+    Param('cloth.k_bend', 100.0, 'bending spring stiffness (N/m)', 0.0, 1e9),
+    Param('cloth.stiffness_scale', [0.0], 'per-level stiffness factor ([0.0] = all 1)',
+          0.0, 1e6),
+    Param('cloth.contraction', [0.0], 'per-level contraction resistance in [0, 1] '
+          '([0.0] = all 1)', 0.0, 1.0),
+    Param('cloth.origin', [0.0, 0.0, 1.0], 'world position of grid point (0, 0) at t = 0 (m)',
+          -1e4, 1e4),
+    Param('cloth.axis_u', [1.0, 0.0, 0.0], 'world direction of the cloth width', -1.0, 1.0),
+    Param('cloth.axis_v', [0.0, 1.0, 0.0], 'world direction of the cloth height', -1.0, 1.0),
+    Param('scene.ground', True, 'a ground plane at scene.ground_z'),
+    Param('scene.ground_z', 0.0, 'ground height (m)', -1e4, 1e4),
+    Param('scene.boxes', [0.0], 'axis-aligned boxes, 6 numbers each: centre xyz, half '
+          'extents xyz (m); [0.0] = none', -1e4, 1e4),
+    Param('scene.spheres', [0.0], 'spheres, 4 numbers each: centre xyz, radius (m); '
+          '[0.0] = none', -1e4, 1e4),
+    Param('scene.friction', 0.5, 'Coulomb friction coefficient with obstacles', 0.0, 10.0),
+    Param('scene.margin', 0.002, 'distance kept from obstacle surfaces (m)', 0.0, 0.1),
+    Param('solver.name', 'hierarchical', 'explicit, approx, hierarchical or implicit'),
+    Param('solver.external', 'exact', 'gravity outside the filter (exact) or inside it '
+          '(literal, the paper as written)'),
+    Param('solver.strain_limit', 0.1, 'largest spring stretch kept by strain limiting '
+          '(0.1 = 10 %); 0 switches it off', 0.0, 10.0, False),
+    Param('solver.dt', 1 / 60, 'simulated seconds per step (s)', 1e-6, 0.1, False),
+    Param('solver.substeps', 1, 'solver steps per timer tick', 1, 100, False),
+    Param('pinned_points', [0, 8], 'finest-level point ids that hold still (see README '
+          'for the numbering); [-1] = none', -1, 2 ** 31 - 1, False),
+]
+PARAM_BY_NAME = {p.name: p for p in PARAMS}
+
+
+def flatten(tree, prefix=''):
+    out = {}
+    for key, value in tree.items():
+        name = f'{prefix}{key}'
+        if isinstance(value, dict):
+            out.update(flatten(value, name + '.'))
+        else:
+            out[name] = value
+    return out
+
+
+def load_file(path):
+    """Parameters of a ROS 2 parameter file (first node section), flattened."""
+    with open(path) as f:
+        doc = yaml.safe_load(f) or {}
+    for section in doc.values():
+        if isinstance(section, dict) and 'ros__parameters' in section:
+            return flatten(section['ros__parameters'])
+    raise ValueError(f'{path}: no "ros__parameters" section')
+
+
+def resolve(overrides=None):
+    """Defaults updated by ``overrides``; unknown names and out-of-range values refused."""
+    values = {p.name: p.default for p in PARAMS}
+    for name, value in (overrides or {}).items():
+        if name not in PARAM_BY_NAME:
+            continue        # node-only parameters (rate, topics, ...) live elsewhere
+        spec = PARAM_BY_NAME[name]
+        if spec.low is not None:
+            arr = np.atleast_1d(np.asarray(value, dtype=float))
+            if not np.all(np.isfinite(arr)) or arr.min() < spec.low or arr.max() > spec.high:
+                raise ValueError(f'{name} = {value!r} outside [{spec.low}, {spec.high}]')
+        values[name] = value
+    return values
+
+
+def _list_or_none(values, count=None):
+    """``[0.0]`` (the ROS-friendly "unset") means None; otherwise a float list."""
+    vals = [float(v) for v in values]
+    if vals == [0.0]:
+        return None
+    if count and len(vals) % count:
+        raise ValueError(f'expected a multiple of {count} numbers, got {len(vals)}')
+    return vals
+
+
+def pin_ids(values):
+    """``[-1]`` (the ROS-friendly "none": an empty YAML list has no type) means no pins."""
+    ids = [int(v) for v in values]
+    return [] if ids == [-1] else ids
+
+
+def build_model(values):
+    scene = make_scene(
+        ground_z=float(values['scene.ground_z']) if values['scene.ground'] else None,
+        boxes=np.reshape(_list_or_none(values['scene.boxes'], 6) or [], (-1, 6)),
+        spheres=np.reshape(_list_or_none(values['scene.spheres'], 4) or [], (-1, 4)),
+        friction=float(values['scene.friction']), margin=float(values['scene.margin']))
+    placement = Placement(tuple(map(float, values['cloth.origin'])),
+                          tuple(map(float, values['cloth.axis_u'])),
+                          tuple(map(float, values['cloth.axis_v'])))
+    return ClothBuilder(
+        width=float(values['cloth.width']), height=float(values['cloth.height']),
+        resolution=tuple(int(v) for v in values['cloth.resolution']),
+        level_count=int(values['cloth.levels']), total_mass=float(values['cloth.mass']),
+        k_struct=float(values['cloth.k_struct']), k_shear=float(values['cloth.k_shear']),
+        k_bend=float(values['cloth.k_bend']),
+        stiffness_scale=_list_or_none(values['cloth.stiffness_scale']),
+        contraction=_list_or_none(values['cloth.contraction']),
+        placement=placement, scene=scene).finalize()
+
+
+def build_solver(model, values):
+    limit = float(values['solver.strain_limit'])
+    return make_solver(values['solver.name'], model, external=values['solver.external'],
+                       strain_limit=limit if limit > 0 else None)
+
+
+def build_all(values):
+    """``(model, solver, state, control)`` for resolved parameter values."""
+    model = build_model(values)
+    solver = build_solver(model, values)
+    state = State.at_rest(model)
+    control = Control(model)
+    control.set_pins(pin_ids(values['pinned_points']))
+    return model, solver, state, control
