@@ -149,9 +149,10 @@ class Control:
         """Set a grasp frame's pose; its points follow rigidly from the next step."""
         if name not in self._grasps:
             raise KeyError(f'no grasp named {name!r} (have {self.grasp_names})')
+        rotation = _check_rotation(rotation)
+        translation = _check_vector(translation, 'translation')
         g = self._grasps[name]
-        g.rotation = _check_rotation(rotation)
-        g.translation = _check_vector(translation, 'translation')
+        g.rotation, g.translation = rotation, translation
 
     def release(self, name):
         if self._grasps.pop(name, None) is not None:
@@ -177,7 +178,7 @@ class Control:
         self.move_grasp(name, np.eye(3), pos)
 
     def clear_target(self, point_id):
-        self.release(('target', int(point_id)))
+        self.release(('target', int(self._check_ids([point_id])[0])))
 
     # --- resolution ---------------------------------------------------------------------
     def _touch(self):

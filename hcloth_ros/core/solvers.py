@@ -266,14 +266,14 @@ class ImplicitSolver(_SingleLevel):
     """Backward Euler on one level, solved to a tolerance: the converged reference.
 
     Each Newton iteration solves ``(M - h^2 J(x + h v+)) dv = -R(v+)`` for the residual
-    ``R(v+) = M (v+ - v) - h f(x + h v+) - h M g`` by CG, until the largest position
-    change of an iteration, ``h |dv|_inf``, is below ``tolerance`` (m) or
-    ``max_newton`` iterations have run (the report's ``converged`` says which).
+    ``R(v+) = M (v+ - v) - h f(x + h v+) - h M g`` by CG, until the estimated
+    remaining position error is below ``tolerance`` (m), or ``max_newton`` iterations
+    have run (the report's ``converged`` says which); see :func:`_newton_done`.
     """
 
     name = 'implicit'
 
-    def __init__(self, model, level=None, tolerance=1e-6, max_newton=20, cg_rtol=1e-6,
+    def __init__(self, model, level=None, tolerance=1e-6, max_newton=100, cg_rtol=1e-6,
                  cg_max_iter=2000, **options):
         super().__init__(model, level=level, **options)
         if not (0 < tolerance < 1):
@@ -301,6 +301,7 @@ class ImplicitSolver(_SingleLevel):
         x_eval = self._q[k]
         newton = cg_total = 0
         converged = False
+        previous = None
         for newton in range(1, self.max_newton + 1):
             np.multiply(v_plus, h, out=x_eval)
             x_eval += q
@@ -319,9 +320,11 @@ class ImplicitSolver(_SingleLevel):
                                                   self.cg_max_iter, r, z, p, ap)
             cg_total += iters
             v_plus += delta
-            if h * np.max(np.abs(delta)) < self.tolerance:
+            change = h * np.max(np.abs(delta))
+            if _newton_done(change, previous, self.tolerance):
                 converged = True
                 break
+            previous = change
         np.multiply(v_plus, h, out=x_eval)
         x_eval += q
         np.subtract(v_plus, qd, out=self._dv[k])
@@ -335,6 +338,24 @@ class ImplicitSolver(_SingleLevel):
         report.cg_iterations = report.extra.get('cg_iterations', 0)
         report.converged = report.extra.get('converged', True)
         return report
+
+
+def _newton_done(change, previous, tolerance):
+    """Whether Newton's remaining error is below ``tolerance``.
+
+    ``change`` is this iteration's largest position update ``h |dv|_inf`` (m),
+    ``previous`` the last one (None on the first iteration). The Newton matrix clamps the
+    transverse stiffness of compressed springs to stay positive definite, so convergence
+    can be linear with rate ``rho = change / previous``; the iterations still to come then
+    add up to at most ``change * rho / (1 - rho)``. Stop when both that and ``change``
+    are below the tolerance; with no rate yet, only on a change ten times smaller.
+    """
+    if previous is None:
+        return change < 0.1 * tolerance
+    rho = change / previous if previous > 0 else 0.0
+    if rho >= 1.0:
+        return False
+    return change * max(1.0, rho / (1.0 - rho)) < tolerance
 
 
 SOLVERS = {cls.name: cls for cls in

@@ -1,0 +1,48 @@
+"""Scene parameter files: every shipped config builds, bad values are refused."""
+
+import glob
+import os
+
+import numpy as np
+import pytest
+
+from hcloth_ros import params
+
+CONFIG = os.path.join(os.path.dirname(os.path.dirname(__file__)), 'config')
+
+
+@pytest.mark.parametrize('path', sorted(glob.glob(os.path.join(CONFIG, '*.yaml'))))
+def test_shipped_configs_build(path):
+    values = params.resolve(params.load_file(path))
+    model, solver, state, control = params.build_all(values)
+    # the finest level has 2^(L-1) (n0 - 1) + 1 points a side, as documented
+    n0u, n0v = values['cloth.resolution']
+    lv = model.level(model.level_count - 1)
+    assert (lv.cols, lv.rows) == (2 ** (model.level_count - 1) * (n0u - 1) + 1,
+                                  2 ** (model.level_count - 1) * (n0v - 1) + 1)
+    assert model.total_mass == pytest.approx(values['cloth.mass'])
+    assert solver.name == values['solver.name']
+    report = solver.step(state, control, values['solver.dt'])
+    assert report.ok and np.all(np.isfinite(state.q[-1]))
+
+
+def test_hanging_pins_two_level0_corners():
+    values = params.resolve(params.load_file(os.path.join(CONFIG, 'hanging.yaml')))
+    model, _, state, control = params.build_all(values)
+    ends = state.points_by_id(model, 0)[control.pins]
+    assert np.allclose(ends, [[-0.5, 0.0, 1.5], [0.5, 0.0, 1.5]])
+
+
+@pytest.mark.parametrize('name,value', [('cloth.width', -1.0), ('cloth.levels', 11),
+                                        ('scene.friction', float('nan')),
+                                        ('cloth.contraction', [0.5, 1.5])])
+def test_out_of_range_values_are_refused(name, value):
+    with pytest.raises(ValueError, match=name.replace('.', r'\.')):
+        params.resolve({name: value})
+
+
+def test_pin_sentinel_and_bad_ids():
+    assert params.pin_ids([-1]) == []
+    values = params.resolve({'pinned_points': [10 ** 6]})
+    with pytest.raises(IndexError, match='out of range'):
+        params.build_all(values)
