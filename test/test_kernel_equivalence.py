@@ -1,0 +1,436 @@
+"""The numba kernels against plain numpy implementations of the same formulas.
+
+The per-step kernels have an interior fast path (whole rows, vectorised, each spring of
+the strain limiter evaluated once for both ends) and a generic per-point path (border
+band, rows near held points), plus a serial form for small levels and a chunked parallel
+form for large ones. The references here are written independently, over whole arrays
+with shifted copies (numpy), straight from the definitions in the kernels' docstrings:
+
+* eq. 4 / 6: ``f~ = sum_s [c_s k_s (|d| - L_s) d / |d| + h k_s (v_n - v)]`` over the
+  12-entry stencil (``c_s`` the contraction factor of a compressed spring),
+  ``a = h f~ / (m + h^2 K)``, ``dv = (h f~ + h^2 sum_s k_s a_n) / (m + h^2 K)``;
+* eq. 7 on inserted points with ``dv_app`` (held neighbours: their prescribed change);
+* Provot strain limiting by Jacobi sweeps (mean of the corrections of over-stretched
+  springs, half each when both ends move), stopping on the relative tolerance.
+
+Both sides add the same terms in the same order, so they agree to rounding; the tests
+allow 1e-12 relative to the size of each output. Grids are small (9 x 11: the serial
+form, every path) and above the parallel threshold (97 x 91), randomly perturbed, with
+held points in the interior and on the border.
+"""
+
+import numpy as np
+import pytest
+
+from hcloth_ros.core import kernels
+from hcloth_ros.core.model import STENCIL_DC, STENCIL_DR
+
+RTOL = 1e-12
+H = 1.0 / 60.0
+GRAVITY = np.array([0.3, -0.2, -9.81])
+SHAPES = [(9, 11), (97, 91)]
+
+
+def close(actual, expected, what):
+    """Agreement to RTOL relative to the largest entry of ``expected`` (NaN-aware)."""
+    actual = np.asarray(actual, dtype=float)
+    expected = np.asarray(expected, dtype=float)
+    assert actual.shape == expected.shape, what
+    assert np.array_equal(np.isnan(actual), np.isnan(expected)), f'{what}: NaN pattern'
+    scale = max(np.nanmax(np.abs(expected)), 1e-300)
+    err = np.nanmax(np.abs(actual - expected)) if actual.size else 0.0
+    assert err <= RTOL * scale, f'{what}: max difference {err:.3g} vs scale {scale:.3g}'
+
+
+def shift(a, dr, dc):
+    """``out[..., r, c] = a[..., r + dr, c + dc]`` where that exists (else 0) and the mask
+    of where it exists."""
+    rows, cols = a.shape[-2:]
+    out = np.zeros_like(a)
+    valid = np.zeros((rows, cols), dtype=bool)
+    r0, r1 = max(0, -dr), min(rows, rows - dr)
+    c0, c1 = max(0, -dc), min(cols, cols - dc)
+    out[..., r0:r1, c0:c1] = a[..., r0 + dr:r1 + dr, c0 + dc:c1 + dc]
+    valid[r0:r1, c0:c1] = True
+    return out, valid
+
+
+def length(d):
+    return np.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
+
+
+# --- references ---------------------------------------------------------------------------
+
+def ref_force(q, qd, rest, stiff, contraction, h, viscous):
+    f = np.zeros_like(q)
+    with np.errstate(divide='ignore', invalid='ignore'):
+        for s in range(12):
+            qn, valid = shift(q, STENCIL_DR[s], STENCIL_DC[s])
+            vn, _ = shift(qd, STENCIL_DR[s], STENCIL_DC[s])
+            d = qn - q
+            ln = length(d)
+            stretch = ln - rest[s]
+            k = np.where(stretch >= 0.0, stiff[s], stiff[s] * contraction)
+            coef = np.where(ln > 0.0, k * stretch / ln, 0.0)
+            term = coef * d
+            if viscous:
+                term = term + (h * stiff[s]) * (vn - qd)
+            f = np.where(valid, f + term, f)
+    return f
+
+
+def ref_stencil_sum(a, stiff, shift_by):
+    total = np.zeros_like(a)
+    for s in range(12):
+        an, valid = shift(a, STENCIL_DR[s], STENCIL_DC[s])
+        total = np.where(valid, total + stiff[s] * (an - shift_by[:, None, None]), total)
+    return total
+
+
+def ref_eq6(q, qd, mass, rest, stiff, contraction, dinv, kind, presc, h, g, literal):
+    held = kind != 0
+    f = ref_force(q, qd, rest, stiff, contraction, h, True)
+    if literal:
+        f = f + mass * g[:, None, None]
+    ft = h * f
+    gext = np.zeros(3) if literal else h * g
+    a = np.where(held, presc - gext[:, None, None], h * f * dinv)
+    sx = ref_stencil_sum(a, stiff, np.zeros(3))
+    ext = 0.0 if literal else h
+    dv = np.where(held, presc, (ft + (h * h) * sx) * dinv + (ext * g)[:, None, None])
+    v = qd + dv
+    return ft, a, q + h * v, v, dv
+
+
+def ref_eq7(q, qd, mass, rest, stiff, contraction, dinv, kind, presc, h, g, literal,
+            q_c, qd_c, dv_c, dv_app):
+    held = kind != 0
+    gx = (0.0 if literal else h) * g
+    f = ref_force(q, qd, rest, stiff, contraction, h, True)
+    if literal:
+        f = f + mass * g[:, None, None]
+    src = np.where(held, presc, dv_app)
+    sx = ref_stencil_sum(src, stiff, gx)
+    dv = np.where(held, presc, (h * f + (h * h) * sx) * dinv + gx[:, None, None])
+    v = qd + dv
+    qo, qdo = q + h * v, v
+    for arr, coarse in ((qo, q_c), (qdo, qd_c), (dv, dv_c)):
+        arr[:, 0::2, 0::2] = coarse
+    return qo, qdo, dv
+
+
+def ref_explicit(q, qd, mass, rest, stiff, contraction, kind, presc, h, g):
+    f = ref_force(q, qd, rest, stiff, contraction, h, False)
+    dv = np.where(kind != 0, presc, h * (f * (1.0 / mass) + g[:, None, None]))
+    v = qd + dv
+    return q + h * v, v, dv
+
+
+def ref_movable(kind, inherited_fixed):
+    rows, cols = kind.shape
+    r, c = np.meshgrid(np.arange(rows), np.arange(cols), indexing='ij')
+    return (kind == 0) & ~(inherited_fixed & (r % 2 == 0) & (c % 2 == 0))
+
+
+def ref_strain_limit(q, qd, dv, rest, kind, inherited_fixed, max_stretch, iterations,
+                     tolerance, h):
+    q, qd, dv = q.copy(), qd.copy(), dv.copy()
+    mov = ref_movable(kind, inherited_fixed)
+    for it in range(iterations):
+        corr = np.zeros_like(q)
+        count = np.zeros(kind.shape)
+        worst = 0.0
+        with np.errstate(divide='ignore', invalid='ignore'):
+            for s in range(8):
+                qn, valid = shift(q, STENCIL_DR[s], STENCIL_DC[s])
+                mov_n, _ = shift(mov, STENCIL_DR[s], STENCIL_DC[s])
+                d = qn - q
+                ln = length(d)
+                limit = (1.0 + max_stretch) * rest[s]
+                over = valid & mov & ~(ln <= limit)
+                if over.any():
+                    worst = max(worst, np.nanmax(np.where(over, ln / limit - 1.0, 0.0)))
+                share = np.where(mov_n, 0.5, 1.0)
+                corr = np.where(over, corr + share * (ln - limit) / ln * d, corr)
+                count += over
+            corr = np.where(mov & (count > 0), corr / np.maximum(count, 1), 0.0)
+        if worst <= tolerance:
+            return q, qd, dv, it
+        q = q + corr
+        qd = qd + corr / h
+        dv = dv + corr / h
+    return q, qd, dv, iterations
+
+
+def ref_prolong(coarse, rows, cols):
+    r = np.arange(rows)
+    c = np.arange(cols)
+    a = coarse[:, (r // 2)[:, None], (c // 2)[None, :]]
+    b = coarse[:, ((r + 1) // 2)[:, None], ((c + 1) // 2)[None, :]]
+    return 0.5 * (a + b)
+
+
+# --- inputs -------------------------------------------------------------------------------
+
+def make_level(rows, cols, seed, stretch=1.0, noise=0.15, held=6):
+    """A grid of spacing ``du * stretch`` with random offsets, springs of the model's
+    stencil, random masses and velocities, some pinned and driven points (a few on the
+    border, some inside) and random prescribed changes."""
+    rng = np.random.default_rng(seed)
+    du = 1.0 / (cols - 1)
+    dv_ = 1.3 / (rows - 1)
+    c, r = np.meshgrid(np.arange(cols) * du * stretch, np.arange(rows) * dv_ * stretch)
+    q = np.stack([c, r, 0.2 * c * r]) + noise * du * rng.standard_normal((3, rows, cols))
+    shear = np.hypot(du, dv_)
+    rest = np.array([du, du, dv_, dv_, shear, shear, shear, shear,
+                     2 * du, 2 * du, 2 * dv_, 2 * dv_])
+    stiff = np.array([1000.0] * 4 + [800.0] * 4 + [100.0] * 4)
+    mass = rng.uniform(0.5, 1.5, (rows, cols)) * 0.2 / (rows * cols)
+    dinv = 1.0 / (mass + H * H * rng.uniform(5000.0, 7000.0, (rows, cols)))
+    kind = np.zeros((rows, cols), dtype=np.int8)
+    for i in range(held):
+        kind[rng.integers(rows), rng.integers(cols)] = 1 + i % 2
+    kind[0, 0] = 1
+    kind[rows - 1, cols // 2] = 2
+    return dict(q=np.ascontiguousarray(q), qd=rng.standard_normal((3, rows, cols)) * 0.2,
+                mass=mass, dinv=dinv, rest=rest, stiff=stiff, kind=kind,
+                presc=rng.standard_normal((3, rows, cols)) * 0.1, rng=rng)
+
+
+def full(shape):
+    return np.full(shape, np.nan)
+
+
+# --- tests --------------------------------------------------------------------------------
+
+@pytest.mark.parametrize('rows,cols', SHAPES)
+@pytest.mark.parametrize('literal', [False, True])
+@pytest.mark.parametrize('contraction', [1.0, 0.5])
+def test_eq6_sweeps(rows, cols, literal, contraction):
+    lv = make_level(rows, cols, seed=rows + int(literal) + int(10 * contraction),
+                    noise=0.3)
+    args = (lv['q'], lv['qd'], lv['mass'], lv['rest'], lv['stiff'], contraction,
+            lv['dinv'], lv['kind'], lv['presc'], H, GRAVITY, literal)
+    expected = ref_eq6(*args)
+    shape = lv['q'].shape
+    ft, a = full(shape), full(shape)
+    kernels.eq6_first_sweep(*args, ft, a)
+    q_out, qd_out, dv_out = full(shape), full(shape), full(shape)
+    kernels.eq6_second_sweep(lv['q'], lv['qd'], lv['stiff'], lv['dinv'], lv['kind'],
+                             lv['presc'], ft, a, H, GRAVITY, literal, q_out, qd_out, dv_out)
+    for name, got, want in zip(('ft', 'a', 'q', 'qd', 'dv'), (ft, a, q_out, qd_out, dv_out),
+                               expected):
+        close(got, want, f'eq6 {name}')
+    # the input has stretched and compressed springs both (so contraction matters)
+    qn, valid = shift(lv['q'], 0, 1)
+    ln = length(qn - lv['q'])[valid]
+    assert np.any(ln > lv['rest'][0]) and np.any(ln < lv['rest'][0])
+
+
+@pytest.mark.parametrize('rows,cols', [(9, 11), (97, 91)])
+@pytest.mark.parametrize('literal', [False, True])
+def test_eq7_level_and_prolong(rows, cols, literal):
+    lv = make_level(rows, cols, seed=7 * rows + int(literal), noise=0.3, held=8)
+    rng = lv['rng']
+    crows, ccols = (rows + 1) // 2, (cols + 1) // 2
+    q_c, qd_c, dv_c = (rng.standard_normal((3, crows, ccols)) for _ in range(3))
+    dv_app = full(lv['q'].shape)
+    kernels.prolong(dv_c, dv_app)
+    close(dv_app, ref_prolong(dv_c, rows, cols), 'prolong')
+    contraction = 0.5
+    args = (lv['q'], lv['qd'], lv['mass'], lv['rest'], lv['stiff'], contraction,
+            lv['dinv'], lv['kind'], lv['presc'], H, GRAVITY, literal)
+    expected = ref_eq7(*args, q_c, qd_c, dv_c, dv_app)
+    outs = [full(lv['q'].shape) for _ in range(3)]
+    kernels.eq7_level(*args, q_c, qd_c, dv_c, dv_app, *outs)
+    for name, got, want in zip(('q', 'qd', 'dv'), outs, expected):
+        close(got, want, f'eq7 {name}')
+    # inherited points are copies, bit for bit
+    assert np.array_equal(outs[2][:, 0::2, 0::2], dv_c)
+
+
+@pytest.mark.parametrize('rows,cols', SHAPES)
+def test_explicit_step(rows, cols):
+    lv = make_level(rows, cols, seed=3 * rows, noise=0.3)
+    args = (lv['q'], lv['qd'], lv['mass'], lv['rest'], lv['stiff'], 0.5, lv['kind'],
+            lv['presc'], 1e-3, GRAVITY)
+    expected = ref_explicit(*args)
+    outs = [full(lv['q'].shape) for _ in range(3)]
+    kernels.explicit_step(*args, *outs)
+    for name, got, want in zip(('q', 'qd', 'dv'), outs, expected):
+        close(got, want, f'explicit {name}')
+
+
+@pytest.mark.parametrize('rows,cols', SHAPES)
+@pytest.mark.parametrize('inherited_fixed', [False, True])
+@pytest.mark.parametrize('stretch,noise,iterations,tolerance', [
+    (1.12, 0.25, 6, 0.005),     # every spring over the limit: runs into the sweep cap
+    (1.0, 0.1, 300, 0.02),      # random over-stretch only: stops on the tolerance
+    (1.12, 0.05, 50, 0.5),      # within tolerance from the start: no sweep at all
+])
+def test_strain_limit(rows, cols, inherited_fixed, stretch, noise, iterations, tolerance):
+    lv = make_level(rows, cols, seed=rows + int(10 * stretch), stretch=stretch, noise=noise)
+    dv = lv['rng'].standard_normal(lv['q'].shape)
+    want = ref_strain_limit(lv['q'], lv['qd'], dv, lv['rest'], lv['kind'], inherited_fixed,
+                            0.1, iterations, tolerance, H)
+    got = []
+    for _ in range(2):       # twice: parallel chunks give the same bits every run
+        q, qd, d = lv['q'].copy(), lv['qd'].copy(), dv.copy()
+        corr = full(q.shape)
+        sweeps = kernels.strain_limit(q, qd, d, lv['rest'], lv['kind'], inherited_fixed, 0.1,
+                                      iterations, tolerance, H, corr)
+        got.append((q, qd, d, sweeps))
+    assert got[0][3] == want[3], f'sweeps {got[0][3]} != reference {want[3]}'
+    for name, a, b, c in zip(('q', 'qd', 'dv'), got[0][:3], got[1][:3], want[:3]):
+        close(a, c, f'strain_limit {name}')
+        assert np.array_equal(a, b), f'strain_limit {name} differs between runs'
+    if tolerance == 0.5:
+        assert want[3] == 0 and np.array_equal(got[0][0], lv['q'])
+    elif iterations == 6:
+        assert want[3] == 6
+        assert np.max(np.abs(got[0][0] - lv['q'])) > 1e-3 / cols   # points did move
+    elif not inherited_fixed:
+        # (with inherited points fixed, random offsets of fixed neighbours can make the
+        # limit unreachable; the sweep count is still compared above)
+        assert 0 < want[3] < iterations
+
+
+@pytest.mark.parametrize('rows,cols', SHAPES)
+def test_strain_limit_nan(rows, cols):
+    """A non-finite point spreads NaN to its neighbours' corrections exactly as the
+    per-point form does (and its own springs do not count towards the stopping test),
+    nothing else is touched by it."""
+    lv = make_level(rows, cols, seed=9, stretch=1.0, noise=0.1)
+    q0 = lv['q'].copy()
+    q0[2, rows // 2, cols - 1] = np.nan      # on the border: wrapped neighbours in a row
+    q0[0, 1, 1] = np.inf
+    dv = np.zeros_like(q0)
+    want = ref_strain_limit(q0, lv['qd'], dv, lv['rest'], lv['kind'], False, 0.1, 5, 0.005,
+                            H)
+    q, qd = q0.copy(), lv['qd'].copy()
+    sweeps = kernels.strain_limit(q, qd, dv, lv['rest'], lv['kind'], False, 0.1, 5, 0.005, H,
+                                  full(q.shape))
+    assert sweeps == want[3]
+    assert np.isnan(q).any()
+    close(q, want[0], 'nan q')
+    close(qd, want[1], 'nan qd')
+
+
+@pytest.mark.parametrize('rows,cols', SHAPES)
+def test_strain_limit_asymmetric_rest(rows, cols):
+    """Rest lengths that differ between opposite directions take the per-point form:
+    same numbers as the reference."""
+    lv = make_level(rows, cols, seed=5, stretch=1.1, noise=0.2)
+    rest = lv['rest'].copy()
+    rest[1] *= 1.05
+    dv = np.zeros_like(lv['q'])
+    want = ref_strain_limit(lv['q'], lv['qd'], dv, rest, lv['kind'], False, 0.1, 20,
+                            0.005, H)
+    q, qd = lv['q'].copy(), lv['qd'].copy()
+    sweeps = kernels.strain_limit(q, qd, dv, rest, lv['kind'], False, 0.1, 20, 0.005, H,
+                                  full(q.shape))
+    assert sweeps == want[3]
+    close(q, want[0], 'asymmetric q')
+    close(qd, want[1], 'asymmetric qd')
+
+
+@pytest.mark.parametrize('rows,cols', SHAPES)
+def test_strain_stats(rows, cols):
+    lv = make_level(rows, cols, seed=11, stretch=1.05, noise=0.3)
+    q, qd, rest = lv['q'], lv['qd'], lv['rest']
+    strains = []
+    for s in (0, 2, 4, 6):
+        qn, valid = shift(q, STENCIL_DR[s], STENCIL_DC[s])
+        strains.append((length(qn - q) / rest[s] - 1.0)[valid])
+    e = np.concatenate(strains)
+    mx, mean, finite = kernels.strain_stats(q, qd, rest)
+    assert finite
+    assert mx == max(e.max(), 0.0)
+    assert abs(mean - np.abs(e).mean()) <= RTOL * np.abs(e).mean()
+    bad = q.copy()
+    bad[1, rows // 2, cols // 3] = np.nan
+    assert not kernels.strain_stats(bad, qd, rest)[2]
+    vbad = qd.copy()
+    vbad[2, rows - 1, cols - 1] = np.inf
+    assert not kernels.strain_stats(q, vbad, rest)[2]
+
+
+def test_prescribe():
+    lv = make_level(9, 11, seed=2)
+    kind, qd, q = lv['kind'], lv['qd'], lv['q']
+    presc = lv['presc'].copy()
+    before = presc.copy()
+    index = np.array([5, 9 * 11 - 1], dtype=np.int64)
+    target = lv['rng'].standard_normal((3, 2))
+    kernels.prescribe(q, qd, kind, index, target, H, presc)
+    pinned = kind == 1
+    close(presc[:, pinned], -qd[:, pinned], 'pinned')
+    untouched = ~pinned
+    untouched.ravel()[index] = False
+    assert np.array_equal(presc[:, untouched], before[:, untouched])
+    for m, g in enumerate(index):
+        r, c = divmod(int(g), 11)
+        close(presc[:, r, c], (target[:, m] - q[:, r, c]) / H - qd[:, r, c], 'driven')
+
+
+@pytest.mark.parametrize('limit', [0.011, 1.0 / 64.0 * 1.1, 0.0884, 3.0])
+@pytest.mark.parametrize('tolerance', [0.0, 1e-9, 0.005, 0.3])
+def test_excess_threshold(limit, tolerance):
+    """The strain limiter's stopping test ``length >= threshold`` is exactly the division
+    form ``length / limit - 1 > tolerance``: true at the threshold, false one float
+    below it."""
+    t = kernels._excess_threshold(limit, tolerance)
+    assert t / limit - 1.0 > tolerance
+    below = np.nextafter(t, 0.0)
+    assert not (below / limit - 1.0 > tolerance)
+
+
+def ref_system_apply(q, rest, stiff, contraction, mass, free, h, p):
+    """``(M - h^2 J) p`` with the clamped spring blocks ``k (b I + (1 - b) u u^T)``,
+    ``b = max(0, 1 - L / |d|)``; identity on held points."""
+    h2 = h * h
+    out = mass * p
+    with np.errstate(divide='ignore', invalid='ignore'):
+        for s in range(12):
+            qn, valid = shift(q, STENCIL_DR[s], STENCIL_DC[s])
+            pn, _ = shift(p, STENCIL_DR[s], STENCIL_DC[s])
+            fn, _ = shift(free, STENCIL_DR[s], STENCIL_DC[s])
+            d = qn - q
+            ln = length(d)
+            k = np.where(ln >= rest[s], stiff[s], stiff[s] * contraction)
+            x = 1.0 - rest[s] / ln
+            b = np.where(ln <= 0.0, 1.0, np.where(x > 0.0, x, 0.0))
+            u = np.where(ln <= 0.0, 0.0, d / ln)
+            pd = p - fn * pn
+            proj = (1.0 - b) * (u[0] * pd[0] + u[1] * pd[1] + u[2] * pd[2])
+            out = np.where(valid, out + h2 * k * (b * pd + proj * u), out)
+    return np.where(free == 0.0, p, out)
+
+
+@pytest.mark.parametrize('rows,cols', SHAPES)
+@pytest.mark.parametrize('contraction', [1.0, 0.3])
+def test_system_apply_and_cg(rows, cols, contraction):
+    """The backward-Euler system of the implicit solver, and CG on it: the solution's
+    residual, computed with the reference product, is within the requested tolerance."""
+    lv = make_level(rows, cols, seed=13, noise=0.3)
+    q = lv['q'].copy()
+    q[:, rows // 2, cols // 2] = q[:, rows // 2, cols // 2 - 1]    # a zero-length spring
+    free = (lv['kind'] == 0).astype(float)
+    p = lv['rng'].standard_normal(q.shape)
+    out = full(q.shape)
+    kernels.system_apply(q, lv['rest'], lv['stiff'], contraction, lv['mass'], free, H, p,
+                         out)
+    close(out, ref_system_apply(q, lv['rest'], lv['stiff'], contraction, lv['mass'], free,
+                                H, p), 'system_apply')
+    b = lv['rng'].standard_normal(q.shape) * free
+    diag = full(q.shape)
+    kernels.system_diagonal(q, lv['rest'], lv['stiff'], contraction, lv['mass'], free, H,
+                            diag)
+    x, r, z, pp, ap = (np.zeros_like(q) for _ in range(5))
+    iters, rel = kernels.conjugate_gradient(q, lv['rest'], lv['stiff'], contraction,
+                                            lv['mass'], free, H, b, x, diag, 1e-10, 2000,
+                                            r, z, pp, ap)
+    assert 0 < iters < 2000 and rel <= 1e-10
+    residual = b - ref_system_apply(q, lv['rest'], lv['stiff'], contraction, lv['mass'],
+                                    free, H, x)
+    assert np.linalg.norm(residual) <= 1e-9 * np.linalg.norm(b)
