@@ -188,15 +188,20 @@ def test_contraction_resistance_makes_wrinkles():
 
 def test_strain_limiting_bounds_stretch_of_hierarchical_cloth():
     # Without strain limiting the exact-gravity hierarchy stretches springs near the pins
-    # by several hundred percent at h = 1/60 (method.md section 6); with a 10 % limit
-    # every level stays within the limit plus the sweep tolerance (0.5 % of the limit
-    # length) plus what one step of motion adds back: we allow 12 %.
-    m_free, free = _hanging(strain_limit=None)
-    m_lim, limited = _hanging(strain_limit=0.1)
+    # by several hundred percent at h = 1/60 (method.md section 6). With a 10 % limit
+    # swept to convergence, every level stays within the limit plus the sweep tolerance
+    # (0.5 % of the limit length) plus what one step of motion adds back: we allow 12 %.
+    # The default sweeps level 0 to convergence and gives refinement levels 4 sweeps
+    # (their inherited points are fixed; measured worst over this run 15.7 %): level 0
+    # keeps the 12 % bound, finer levels stay under 20 %.
     from hcloth_ros.core.metrics import strain
+    m_free, free = _hanging(strain_limit=None)
     assert strain(m_free, free, 3)[0] > 1.0
+    m_conv, converged = _hanging(strain_limit=0.1, strain_refine_iterations=100)
+    m_def, default = _hanging(strain_limit=0.1)
     for k in range(4):
-        assert strain(m_lim, limited, k)[0] < 0.12
+        assert strain(m_conv, converged, k)[0] < 0.12
+        assert strain(m_def, default, k)[0] < (0.12 if k == 0 else 0.2)
 
 
 def test_cloth_dropped_on_table_rests_and_drapes():

@@ -64,7 +64,11 @@ class Solver:
         external: ``'exact'`` or ``'literal'`` (see the module docstring).
         strain_limit: largest stretch kept by strain limiting (0.1 = 10 %), or None to
             switch it off.
-        strain_iterations: most Jacobi sweeps of strain limiting per level and step.
+        strain_iterations: most Jacobi sweeps of strain limiting per step on a level that
+            integrates all its points (level 0, or the one level of a single-level solver).
+        strain_refine_iterations: most sweeps on a refinement level of the hierarchy. Its
+            inherited points are fixed, so it only straightens what lies between them; it
+            cannot undo a coarser level's stretch and would spend any budget trying.
         strain_tolerance: sweeps stop once no spring exceeds the limit by more than this
             (relative to the limit).
         blowup_strain: a step that leaves a spring stretched beyond this (relative) or
@@ -74,13 +78,15 @@ class Solver:
     name = ''
 
     def __init__(self, model, external='exact', strain_limit=0.1, strain_iterations=100,
-                 strain_tolerance=0.005, blowup_strain=10.0):
+                 strain_refine_iterations=4, strain_tolerance=0.005, blowup_strain=10.0):
         if external not in EXTERNAL_MODES:
             raise ValueError(f'external must be one of {EXTERNAL_MODES}, got {external!r}')
         if strain_limit is not None and not (0.0 < strain_limit < 10.0):
             raise ValueError(f'strain_limit must be in (0, 10) or None, got {strain_limit}')
-        if not (1 <= int(strain_iterations) <= 1000):
-            raise ValueError(f'strain_iterations must be in 1..1000, got {strain_iterations}')
+        for name, value in (('strain_iterations', strain_iterations),
+                            ('strain_refine_iterations', strain_refine_iterations)):
+            if not (1 <= int(value) <= 10000):
+                raise ValueError(f'{name} must be in 1..10000, got {value}')
         if not (0.0 < strain_tolerance < 1.0):
             raise ValueError(f'strain_tolerance must be in (0, 1), got {strain_tolerance}')
         if not (blowup_strain > 0):
@@ -90,6 +96,7 @@ class Solver:
         self.external = external
         self.strain_limit = strain_limit
         self.strain_iterations = int(strain_iterations)
+        self.strain_refine_iterations = int(strain_refine_iterations)
         self.strain_tolerance = float(strain_tolerance)
         self.blowup_strain = float(blowup_strain)
         shapes = [(3, lv.rows, lv.cols) for lv in model.levels]
@@ -129,7 +136,9 @@ class Solver:
         if self.strain_limit is not None:
             sweeps = kernels.strain_limit(self._q[k], self._qd[k], self._dv[k], lv.rest,
                                           holds.kind, inherited_fixed, self.strain_limit,
-                                          self.strain_iterations, self.strain_tolerance, h,
+                                          self.strain_refine_iterations if inherited_fixed
+                                          else self.strain_iterations,
+                                          self.strain_tolerance, h,
                                           self._scratch[k])
             self._extra[f'strain_sweeps_{k}'] = sweeps
         scene = self.model.scene
