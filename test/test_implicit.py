@@ -45,10 +45,10 @@ def one_step(model, control, state, **options):
 
 
 def _check_halving(model, control, state, tol):
-    # Newton stops once an iteration moves no point by more than tol (h |dv|_inf < tol).
-    # With a contraction rate rho per iteration the remaining error is at most
-    # rho / (1 - rho) * tol, so for rho < 0.4 both results lie within 2/3 tol of the exact
-    # solution and differ by less than tol. The reference is solved to 1e-12 m.
+    # Newton stops once its estimated remaining error, the last update h |dv|_inf times
+    # max(1, rho / (1 - rho)) with rho the observed contraction rate, is below tol
+    # (solvers._newton_done). Both results then lie within tol of the exact solution (the
+    # tighter one within tol / 2) and differ by less than tol. Reference: 1e-12 m.
     s1, r1 = one_step(model, control, state, tolerance=tol)
     s2, r2 = one_step(model, control, state, tolerance=tol / 2)
     ref, rr = one_step(model, control, state, tolerance=1e-12, cg_rtol=1e-12,
