@@ -1,0 +1,42 @@
+"""Message conversions, without a ROS graph."""
+
+import numpy as np
+import pytest
+from builtin_interfaces.msg import Time
+from visualization_msgs.msg import Marker
+
+from hcloth_ros.core import ClothBuilder, State
+from hcloth_ros.ros_msgs import points_from_pointcloud2, pointcloud2, triangle_marker
+
+
+def test_pointcloud2_round_trip_is_float32_exact():
+    # float32 fields: the round trip equals the float32 rounding of the input exactly
+    rng = np.random.default_rng(1)
+    pts = rng.normal(0, 2, (1000, 3))
+    msg = pointcloud2(pts, 'world', Time(sec=3, nanosec=7))
+    assert (msg.width, msg.height, msg.point_step, msg.row_step) == (1000, 1, 12, 12000)
+    assert [f.name for f in msg.fields] == ['x', 'y', 'z']
+    assert msg.header.frame_id == 'world' and msg.header.stamp.sec == 3
+    assert msg.is_dense and len(msg.data) == 12000
+    back = points_from_pointcloud2(msg)
+    assert np.array_equal(back, pts.astype(np.float32).astype(np.float64))
+
+
+def test_pointcloud2_flags_non_finite_and_refuses_bad_shapes():
+    pts = np.zeros((4, 3))
+    pts[2, 1] = np.nan
+    assert not pointcloud2(pts, 'world', Time()).is_dense
+    with pytest.raises(ValueError, match=r'\(n, 3\)'):
+        pointcloud2(np.zeros((4, 2)), 'world', Time())
+
+
+def test_triangle_marker_of_a_level_has_three_points_per_triangle():
+    model = ClothBuilder(resolution=(3, 4), level_count=2).finalize()
+    state = State.at_rest(model)
+    tri = model.grid_triangles(1)
+    msg = triangle_marker(state.points(1), tri, 'world', Time(), ns='lod', marker_id=1)
+    assert msg.type == Marker.TRIANGLE_LIST and msg.ns == 'lod' and msg.id == 1
+    # level 1 of a 3 x 4 level 0 is 7 x 5 points: 2 * 6 * 4 triangles
+    assert len(msg.points) == 3 * 2 * 6 * 4 == 3 * len(tri)
+    first = np.array([[p.x, p.y, p.z] for p in msg.points[:3]])
+    assert np.array_equal(first, state.points(1)[tri[0]])
