@@ -24,6 +24,7 @@ setup(
     },
     entry_points={
         'console_scripts': [
+            'sim_node = hcloth_ros.node:main',
             'hcloth_demo = hcloth_ros.demo:main',
             'hcloth_engine_bench = hcloth_ros.bench_engine:main',
         ],

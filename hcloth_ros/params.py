@@ -37,7 +37,7 @@ PARAMS = [
           0.0, 1e6),
     Param('cloth.contraction', [0.0], 'per-level contraction resistance in [0, 1] '
           '([0.0] = all 1)', 0.0, 1.0),
-    Param('cloth.origin', [0.0, 0.0, 1.0], 'world position of grid point (0, 0) at t = 0 (m)',
+    Param('cloth.origin', [-0.5, 0.0, 1.5], 'world position of grid point (0, 0) at t = 0 (m)',
           -1e4, 1e4),
     Param('cloth.axis_u', [1.0, 0.0, 0.0], 'world direction of the cloth width', -1.0, 1.0),
     Param('cloth.axis_v', [0.0, 1.0, 0.0], 'world direction of the cloth height', -1.0, 1.0),

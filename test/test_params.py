@@ -46,3 +46,11 @@ def test_pin_sentinel_and_bad_ids():
     values = params.resolve({'pinned_points': [10 ** 6]})
     with pytest.raises(IndexError, match='out of range'):
         params.build_all(values)
+
+
+def test_defaults_are_the_hanging_scene():
+    # `ros2 run hcloth_ros sim_node` with no parameter file runs config/hanging.yaml
+    defaults = params.resolve({})
+    hanging = params.resolve(params.load_file(os.path.join(CONFIG, 'hanging.yaml')))
+    for name, value in hanging.items():
+        assert np.all(np.asarray(defaults[name]) == np.asarray(value)), name

@@ -1,0 +1,83 @@
+"""The node in-process: its own context and executor, a subscriber node beside it."""
+
+import time
+
+import numpy as np
+import pytest
+import rclpy
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.parameter import Parameter
+from rclpy.qos import qos_profile_sensor_data
+from sensor_msgs.msg import PointCloud2
+from std_srvs.srv import Trigger
+from visualization_msgs.msg import Marker
+
+from hcloth_ros.node import ClothSimNode
+from hcloth_ros.ros_msgs import points_from_pointcloud2
+
+
+@pytest.fixture
+def graph():
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    executor = SingleThreadedExecutor(context=context)
+    sim = ClothSimNode(context=context)
+    probe = rclpy.create_node('probe', context=context)
+    executor.add_node(sim)
+    executor.add_node(probe)
+    clouds, markers = [], []
+    probe.create_subscription(PointCloud2, 'cloth/points', clouds.append,
+                              qos_profile_sensor_data)
+    probe.create_subscription(Marker, 'cloth/lod_marker', markers.append, 10)
+
+    def spin_until(predicate, timeout=10.0):
+        end = time.monotonic() + timeout
+        while time.monotonic() < end and not predicate():
+            executor.spin_once(timeout_sec=0.05)
+        return predicate()
+
+    yield sim, probe, clouds, markers, spin_until, executor
+    executor.shutdown()
+    sim.destroy_node()
+    probe.destroy_node()
+    rclpy.shutdown(context=context)
+
+
+def test_publishes_finest_cloud_and_lod_marker(graph):
+    sim, _, clouds, markers, spin_until, _ = graph
+    assert spin_until(lambda: len(clouds) >= 30 and markers)
+    msg = clouds[-1]
+    assert msg.header.frame_id == 'world'
+    pts = points_from_pointcloud2(msg)
+    assert pts.shape == (65 * 65, 3) and np.all(np.isfinite(pts))
+    # default scene: ids 0 and 8 pinned at the level-0 corners, the rest has fallen
+    assert np.allclose(pts[[0, 8]], [[-0.5, 0.0, 1.5], [0.5, 0.0, 1.5]], atol=1e-6)
+    assert pts[:, 2].mean() < 1.5 - 0.01
+    # lod_level 1 (default) of a 9 x 9 level 0: 17 x 17 points, 2 * 16 * 16 triangles
+    assert len(markers[-1].points) == 3 * 2 * 16 * 16
+
+
+def test_lod_level_changes_at_runtime_and_out_of_range_is_refused(graph):
+    sim, _, _, markers, spin_until, _ = graph
+    results = sim.set_parameters([Parameter('lod_level', value=2)])
+    assert results[0].successful
+    markers.clear()
+    assert spin_until(lambda: len(markers) >= 2)
+    assert len(markers[-1].points) == 3 * 2 * 32 * 32
+    refused = sim.set_parameters([Parameter('lod_level', value=4)])
+    assert not refused[0].successful and 'out of range 0..3' in refused[0].reason
+    assert sim.get_parameter('lod_level').value == 2
+
+
+def test_bad_pins_refused_and_reset_restores(graph):
+    sim, probe, clouds, _, spin_until, executor = graph
+    bad = sim.set_parameters([Parameter('pinned_points', value=[0, 10 ** 6])])
+    assert not bad[0].successful and 'out of range' in bad[0].reason
+    assert list(sim.control.pins) == [0, 8]
+    assert spin_until(lambda: len(clouds) >= 10)
+    client = probe.create_client(Trigger, 'cloth/reset')
+    assert client.wait_for_service(timeout_sec=5.0)
+    future = client.call_async(Trigger.Request())
+    assert spin_until(future.done)
+    assert future.result().success
+    assert np.array_equal(sim.state.q[3], sim.initial.q[3])
