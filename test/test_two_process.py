@@ -1,0 +1,76 @@
+"""The node as `ros2 run` starts it, in its own process, talking over DDS."""
+
+import os
+import random
+import signal
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+import rclpy
+from ament_index_python.packages import get_package_prefix
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.qos import qos_profile_sensor_data
+from sensor_msgs.msg import PointCloud2
+
+from hcloth_ros.ros_msgs import points_from_pointcloud2
+
+PREFIX = sys.prefix    # .ci/setup lays out the ament prefix in the venv
+
+
+def resolve_like_ros2_run(package, executable, env):
+    """What `ros2 run PKG EXE` executes: <prefix from the ament index>/lib/PKG/EXE."""
+    old = os.environ.get('AMENT_PREFIX_PATH')
+    os.environ['AMENT_PREFIX_PATH'] = env['AMENT_PREFIX_PATH']
+    try:
+        prefix = get_package_prefix(package)
+    finally:
+        if old is None:
+            del os.environ['AMENT_PREFIX_PATH']
+        else:
+            os.environ['AMENT_PREFIX_PATH'] = old
+    path = os.path.join(prefix, 'lib', package, executable)
+    assert os.access(path, os.X_OK), f'{path} is not executable'
+    return path
+
+
+@pytest.fixture
+def node_process():
+    domain = random.randint(100, 200)
+    env = dict(os.environ, ROS_DOMAIN_ID=str(domain), AMENT_PREFIX_PATH=PREFIX,
+               PYTHONUNBUFFERED='1')
+    exe = resolve_like_ros2_run('hcloth_ros', 'sim_node', env)
+    proc = subprocess.Popen([exe, '--ros-args', '-p', 'rate_hz:=30.0'], env=env,
+                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    yield proc, domain
+    if proc.poll() is None:
+        proc.kill()
+
+
+def test_sim_node_publishes_to_another_process_and_stops_on_sigint(node_process):
+    proc, domain = node_process
+    context = rclpy.Context()
+    rclpy.init(context=context, domain_id=domain)
+    try:
+        node = rclpy.create_node('client', context=context)
+        executor = SingleThreadedExecutor(context=context)
+        executor.add_node(node)
+        clouds = []
+        node.create_subscription(PointCloud2, 'cloth/points', clouds.append,
+                                 qos_profile_sensor_data)
+        end = time.monotonic() + 60.0     # first start may compile kernels
+        while time.monotonic() < end and len(clouds) < 20 and proc.poll() is None:
+            executor.spin_once(timeout_sec=0.1)
+        assert len(clouds) >= 20, proc.stdout.read() if proc.poll() is not None else ''
+        pts = points_from_pointcloud2(clouds[-1])
+        assert pts.shape == (65 * 65, 3) and np.all(np.isfinite(pts))
+        # the free edge has fallen while the pinned corners hold at 1.5 m
+        assert np.allclose(pts[[0, 8], 2], 1.5, atol=1e-6) and pts[:, 2].min() < 1.4
+        executor.shutdown()
+        node.destroy_node()
+    finally:
+        rclpy.shutdown(context=context)
+    proc.send_signal(signal.SIGINT)
+    assert proc.wait(timeout=10) == 0
