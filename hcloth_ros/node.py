@@ -7,7 +7,19 @@ Steps the engine on a timer at ``rate_hz`` and after every tick publishes
 * ``cloth/lod_marker`` (``visualization_msgs/Marker``, ``TRIANGLE_LIST``): level
   ``lod_level``, changeable at runtime.
 
-``cloth/reset`` (``std_srvs/Trigger``) returns the cloth to its initial state.
+Grippers (parameter ``grippers``, default ``['left', 'right']``), for each name:
+
+* ``cloth/grippers/<name>/pose`` (``geometry_msgs/PoseStamped`` in ``frame_id``): the
+  gripper's target pose; only the newest pose is kept and applied at the next tick;
+* ``cloth/grippers/<name>/close`` (``std_msgs/Bool``): true grasps the finest-level points
+  within ``grasp_radius`` of the gripper (the nearest point if none is that close), which
+  then move rigidly with the gripper pose at every level; false releases them.
+
+Bad input (non-finite poses, wrong frames, commands before any pose) is logged, throttled,
+and dropped; the simulation goes on.
+
+``cloth/reset`` (``std_srvs/Trigger``) returns the cloth to its initial state and releases
+every grasp.
 ``pinned_points`` may be changed at runtime; scene and cloth parameters are read-only.
 """
 
@@ -15,14 +27,20 @@ import rclpy
 from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor,
                                 SetParametersResult)
 from rclpy.executors import ExternalShutdownException
+from dataclasses import dataclass
+
+import numpy as np
+from geometry_msgs.msg import PoseStamped
 from rclpy.node import Node
-from rclpy.qos import qos_profile_sensor_data
+from rclpy.qos import QoSProfile, qos_profile_sensor_data
 from sensor_msgs.msg import PointCloud2
+from std_msgs.msg import Bool
 from std_srvs.srv import Trigger
 from visualization_msgs.msg import Marker
 
 from hcloth_ros import params
 from hcloth_ros.core import warm_up
+from hcloth_ros.core.control import quaternion_to_matrix
 from hcloth_ros.ros_msgs import pointcloud2, triangle_marker
 
 NODE_PARAMS = [
@@ -31,7 +49,23 @@ NODE_PARAMS = [
     params.Param('frame_id', 'world', 'frame of every published position'),
     params.Param('lod_level', 1, 'level published as cloth/lod_marker (0 = coarsest)', 0, 9,
                  False),
+    params.Param('grippers', ['left', 'right'], 'gripper names: each gets '
+                 'cloth/grippers/<name>/pose and .../close'),
+    params.Param('grasp_radius', 0.03, 'a closing gripper takes the points this close (m)',
+                 0.0, 1.0, False),
 ]
+
+
+@dataclass
+class Gripper:
+    """The newest command of one gripper; applied by the timer, never queued."""
+
+    name: str
+    rotation: np.ndarray = None
+    translation: np.ndarray = None
+    pose_pending: bool = False
+    close_request: bool = None      # None: nothing new; True: grasp; False: release
+    grasping: bool = False
 
 
 def _descriptor(spec):
@@ -69,6 +103,18 @@ class ClothSimNode(Node):
                                                qos_profile_sensor_data)
         self.marker_pub = self.create_publisher(Marker, 'cloth/lod_marker', 10)
         self.create_service(Trigger, 'cloth/reset', self._on_reset)
+        self.grippers = {}
+        latest = QoSProfile(depth=1)    # a flood keeps only the newest command
+        for name in self.get_parameter('grippers').value:
+            if not name or name in self.grippers or '/' in name:
+                self.get_logger().error(f'gripper name {name!r} is empty, duplicate or has a '
+                                        '"/": ignored')
+                continue
+            g = self.grippers[name] = Gripper(name)
+            self.create_subscription(PoseStamped, f'cloth/grippers/{name}/pose',
+                                     lambda msg, g=g: self._on_pose(g, msg), latest)
+            self.create_subscription(Bool, f'cloth/grippers/{name}/close',
+                                     lambda msg, g=g: self._on_close(g, msg), latest)
         self.timer = self.create_timer(1.0 / self.get_parameter('rate_hz').value, self._tick)
         lv = self.model.level(self.model.level_count - 1)
         self.get_logger().info(
@@ -94,15 +140,68 @@ class ClothSimNode(Node):
                 self.lod_level = p.value
         return SetParametersResult(successful=True)
 
+    def _on_pose(self, gripper, msg):
+        if msg.header.frame_id != self.frame_id:
+            self.get_logger().warning(
+                f'gripper {gripper.name}: pose in frame {msg.header.frame_id!r}, expected '
+                f'{self.frame_id!r} (no tf here): dropped', throttle_duration_sec=1.0)
+            return
+        p, o = msg.pose.position, msg.pose.orientation
+        try:
+            rotation = quaternion_to_matrix(o.x, o.y, o.z, o.w)
+            translation = np.array([p.x, p.y, p.z])
+            if not np.all(np.isfinite(translation)):
+                raise ValueError(f'position must be finite, got {translation.tolist()}')
+        except ValueError as e:
+            self.get_logger().error(f'gripper {gripper.name}: bad pose dropped: {e}',
+                                    throttle_duration_sec=1.0)
+            return
+        gripper.rotation, gripper.translation = rotation, translation
+        gripper.pose_pending = True
+
+    def _on_close(self, gripper, msg):
+        gripper.close_request = bool(msg.data)
+
+    def _apply_grippers(self):
+        """Apply the newest gripper commands before a step."""
+        for g in self.grippers.values():
+            if g.close_request is not None:
+                request, g.close_request = g.close_request, None
+                if request and g.translation is None:
+                    self.get_logger().warning(f'gripper {g.name}: close before any pose: '
+                                              'ignored', throttle_duration_sec=1.0)
+                elif request and not g.grasping:
+                    ids = self._points_near(g.translation)
+                    self.control.grasp(g.name, ids, self.state, g.rotation, g.translation)
+                    g.grasping, g.pose_pending = True, False
+                    self.get_logger().info(f'gripper {g.name}: grasped {len(ids)} points')
+                elif not request and g.grasping:
+                    self.control.release(g.name)
+                    g.grasping = False
+            if g.grasping and g.pose_pending:
+                self.control.move_grasp(g.name, g.rotation, g.translation)
+                g.pose_pending = False
+
+    def _points_near(self, position):
+        """Finest simulated level ids within grasp_radius, or the nearest one."""
+        k = self.solver.levels()[-1]
+        pts = self.state.points_by_id(self.model, k)
+        d = np.linalg.norm(pts - position, axis=1)
+        ids = np.flatnonzero(d <= self.get_parameter('grasp_radius').value)
+        return ids if ids.size else np.array([int(np.argmin(d))])
+
     def _on_reset(self, request, response):
         self.state.assign(self.initial)
         self.control.release_all()
+        for g in self.grippers.values():
+            g.grasping, g.close_request, g.pose_pending = False, None, False
         response.success = True
         response.message = 'cloth reset to its initial state, every grasp released'
         return response
 
     # --- the timer -----------------------------------------------------------------------
     def _tick(self):
+        self._apply_grippers()
         for _ in range(self.substeps):
             report = self.solver.step(self.state, self.control, self.dt)
             if not report.ok:

@@ -81,3 +81,80 @@ def test_bad_pins_refused_and_reset_restores(graph):
     assert spin_until(future.done)
     assert future.result().success
     assert np.array_equal(sim.state.q[3], sim.initial.q[3])
+
+
+def _pose(probe_time, xyz, quat=(0.0, 0.0, 0.0, 1.0), frame='world'):
+    from geometry_msgs.msg import PoseStamped
+    msg = PoseStamped()
+    msg.header.frame_id = frame
+    msg.header.stamp = probe_time
+    msg.pose.position.x, msg.pose.position.y, msg.pose.position.z = map(float, xyz)
+    (msg.pose.orientation.x, msg.pose.orientation.y, msg.pose.orientation.z,
+     msg.pose.orientation.w) = map(float, quat)
+    return msg
+
+
+def test_gripper_grasps_carries_rigidly_and_releases(graph):
+    from geometry_msgs.msg import PoseStamped
+    from std_msgs.msg import Bool
+    sim, probe, clouds, _, spin_until, _ = graph
+    pose_pub = probe.create_publisher(PoseStamped, 'cloth/grippers/left/pose', 10)
+    close_pub = probe.create_publisher(Bool, 'cloth/grippers/left/close', 10)
+    spin_until(lambda: len(clouds) >= 5)
+    now = probe.get_clock().now().to_msg()
+    corner = sim.state.points_by_id(sim.model, 3)[80]          # a free level-0 corner
+    pose_pub.publish(_pose(now, corner))
+    spin_until(lambda: sim.grippers['left'].translation is not None)
+    close_pub.publish(Bool(data=True))
+    assert spin_until(lambda: sim.grippers['left'].grasping)
+    grasped = sim.control.grasped_ids('left')
+    before = sim.state.points(3)[grasped]
+    # lift 0.3 m and turn 90 degrees about z around the gripper: rigid motion
+    target = corner + [0.0, 0.0, 0.3]
+    s = np.sqrt(0.5)
+    pose_pub.publish(_pose(now, target, (0.0, 0.0, s, s)))
+    clouds.clear()
+    assert spin_until(lambda: len(clouds) >= 5)
+    after = sim.state.points(3)[grasped]
+    rz = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
+    expected = (rz @ (before - corner).T).T + target
+    # kinematic points are placed exactly (float64 round-off of R x + p)
+    assert np.allclose(after, expected, atol=1e-9)
+    # the cloud another node receives carries the same points (float32)
+    pts = points_from_pointcloud2(clouds[-1])
+    ids = sim.model.ids_at(3)[grasped]
+    assert np.allclose(pts[ids], sim.state.points(3)[grasped], atol=1e-5)
+    # released, the corner falls
+    close_pub.publish(Bool(data=False))
+    assert spin_until(lambda: not sim.grippers['left'].grasping)
+    z0 = sim.state.points_by_id(sim.model, 3)[80, 2]
+    clouds.clear()
+    spin_until(lambda: len(clouds) >= 60)
+    # measured 1.34 m after 60 ticks (1 s); free fall would be 4.9 m
+    assert sim.state.points_by_id(sim.model, 3)[80, 2] < z0 - 0.5
+
+
+def test_bad_gripper_commands_are_dropped_and_node_lives(graph):
+    from geometry_msgs.msg import PoseStamped
+    from std_msgs.msg import Bool
+    sim, probe, clouds, _, spin_until, _ = graph
+    pose_pub = probe.create_publisher(PoseStamped, 'cloth/grippers/right/pose', 10)
+    close_pub = probe.create_publisher(Bool, 'cloth/grippers/right/close', 10)
+    spin_until(lambda: len(clouds) >= 3)
+    now = probe.get_clock().now().to_msg()
+    close_pub.publish(Bool(data=True))                 # close before any pose
+    clouds.clear()
+    assert spin_until(lambda: len(clouds) >= 3)        # a few ticks have applied it
+    assert not sim.grippers['right'].grasping and sim.grippers['right'].close_request is None
+    pose_pub.publish(_pose(now, (np.nan, 0.0, 1.0)))   # non-finite position
+    pose_pub.publish(_pose(now, (0.0, 0.0, 1.0), (0.0, 0.0, 0.0, 0.0)))  # zero quaternion
+    pose_pub.publish(_pose(now, (0.0, 0.0, 1.0), frame='map'))            # wrong frame
+    # a flood: only the newest pose is kept
+    for i in range(2000):
+        pose_pub.publish(_pose(now, (0.0, 0.0, 1.0 + i * 1e-4)))
+    clouds.clear()
+    assert spin_until(lambda: len(clouds) >= 20)
+    g = sim.grippers['right']
+    assert not g.grasping
+    assert g.translation is not None and g.translation[2] == pytest.approx(1.1999)
+    assert np.all(np.isfinite(points_from_pointcloud2(clouds[-1])))
