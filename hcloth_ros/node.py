@@ -23,14 +23,15 @@ every grasp.
 ``pinned_points`` may be changed at runtime; scene and cloth parameters are read-only.
 """
 
-import rclpy
-from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor,
-                                SetParametersResult)
-from rclpy.executors import ExternalShutdownException
+import time
 from dataclasses import dataclass
 
 import numpy as np
+import rclpy
 from geometry_msgs.msg import PoseStamped
+from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor,
+                                SetParametersResult)
+from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, qos_profile_sensor_data
 from sensor_msgs.msg import PointCloud2
@@ -40,7 +41,8 @@ from visualization_msgs.msg import Marker
 
 from hcloth_ros import params
 from hcloth_ros.core import warm_up
-from hcloth_ros.core.control import quaternion_to_matrix
+from hcloth_ros.core.control import PINNED, quaternion_to_matrix
+from hcloth_ros.recorder import Recorder
 from hcloth_ros.ros_msgs import pointcloud2, triangle_marker
 
 NODE_PARAMS = [
@@ -51,6 +53,11 @@ NODE_PARAMS = [
                  False),
     params.Param('grippers', ['left', 'right'], 'gripper names: each gets '
                  'cloth/grippers/<name>/pose and .../close'),
+    params.Param('rerun_path', '', 'record the run to this .rrd file; empty: no recording'),
+    params.Param('rerun_url', '', 'stream to a running Rerun viewer at this url instead '
+                 '(e.g. rerun+http://127.0.0.1:9876/proxy); empty: none'),
+    params.Param('rerun_finest_every', 1, 'log the finest mesh every N ticks (the LOD mesh '
+                 'and metrics every tick)', 1, 10000),
     params.Param('grasp_radius', 0.03, 'a closing gripper takes the points this close (m)',
                  0.0, 1.0, False),
 ]
@@ -115,6 +122,12 @@ class ClothSimNode(Node):
                                      lambda msg, g=g: self._on_pose(g, msg), latest)
             self.create_subscription(Bool, f'cloth/grippers/{name}/close',
                                      lambda msg, g=g: self._on_close(g, msg), latest)
+        self.recorder = None
+        path, url = self.get_parameter('rerun_path').value, self.get_parameter('rerun_url').value
+        if path or url:
+            self.recorder = Recorder(self.model, path=path, url=url,
+                                     finest_every=self.get_parameter('rerun_finest_every').value)
+            self.get_logger().info(f'recording to {path or url}')
         self.timer = self.create_timer(1.0 / self.get_parameter('rate_hz').value, self._tick)
         lv = self.model.level(self.model.level_count - 1)
         self.get_logger().info(
@@ -201,6 +214,7 @@ class ClothSimNode(Node):
 
     # --- the timer -----------------------------------------------------------------------
     def _tick(self):
+        start = time.perf_counter()
         self._apply_grippers()
         for _ in range(self.substeps):
             report = self.solver.step(self.state, self.control, self.dt)
@@ -215,6 +229,20 @@ class ClothSimNode(Node):
         self.marker_pub.publish(triangle_marker(self.state.points(k),
                                                 self.model.grid_triangles(k), self.frame_id,
                                                 stamp, ns='hcloth_lod', marker_id=0))
+        if self.recorder is not None:
+            self.recorder.log_step(self.state, finest, k, report, time.perf_counter() - start,
+                                   self.dt * self.substeps, self._held_points(finest))
+
+    def _held_points(self, k):
+        kind = self.control.holds(k).kind.ravel()
+        pts = self.state.points(k)
+        return {'pins': pts[kind == PINNED], 'grasps': pts[kind > PINNED]}
+
+    def destroy_node(self):
+        if self.recorder is not None:
+            self.recorder.close()
+            self.recorder = None
+        super().destroy_node()
 
 
 def main(args=None):
