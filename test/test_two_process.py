@@ -13,6 +13,7 @@ import rclpy
 from ament_index_python.packages import get_package_prefix
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.qos import qos_profile_sensor_data
+from rerun.chunk import RrdReader
 from sensor_msgs.msg import PointCloud2
 
 from hcloth_ros.ros_msgs import points_from_pointcloud2
@@ -37,20 +38,23 @@ def resolve_like_ros2_run(package, executable, env):
 
 
 @pytest.fixture
-def node_process():
+def node_process(tmp_path):
     domain = random.randint(100, 200)
     env = dict(os.environ, ROS_DOMAIN_ID=str(domain), AMENT_PREFIX_PATH=PREFIX,
                PYTHONUNBUFFERED='1')
     exe = resolve_like_ros2_run('hcloth_ros', 'sim_node', env)
-    proc = subprocess.Popen([exe, '--ros-args', '-p', 'rate_hz:=30.0'], env=env,
+    rrd = str(tmp_path / 'run.rrd')
+    proc = subprocess.Popen([exe, '--ros-args', '-p', 'rate_hz:=30.0', '-p',
+                             f'rerun_path:={rrd}'], env=env,
                             stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
-    yield proc, domain
+    yield proc, domain, rrd
     if proc.poll() is None:
         proc.kill()
 
 
-def test_sim_node_publishes_to_another_process_and_stops_on_sigint(node_process):
-    proc, domain = node_process
+@pytest.mark.parametrize('stop', [signal.SIGINT, signal.SIGTERM])
+def test_sim_node_publishes_to_another_process_and_stops_cleanly(node_process, stop):
+    proc, domain, rrd = node_process
     context = rclpy.Context()
     rclpy.init(context=context, domain_id=domain)
     try:
@@ -72,5 +76,8 @@ def test_sim_node_publishes_to_another_process_and_stops_on_sigint(node_process)
         node.destroy_node()
     finally:
         rclpy.shutdown(context=context)
-    proc.send_signal(signal.SIGINT)
+    proc.send_signal(stop)
     assert proc.wait(timeout=10) == 0
+    # the recording is complete: its footer index lists the metrics of every tick
+    summary = str(RrdReader(rrd).store().summary())
+    assert '/metrics/step_ms' in summary and '/cloth/finest' in summary
