@@ -148,9 +148,15 @@ class ClothSimNode(Node):
                     self.control.set_pins(params.pin_ids(p.value))
                 except (IndexError, ValueError) as e:
                     return SetParametersResult(successful=False, reason=str(e))
-        for p in changes:
+        for p in changes:     # every change is valid: apply them all
             if p.name == 'lod_level':
                 self.lod_level = p.value
+            elif p.name == 'solver.dt':
+                self.dt = float(p.value)
+            elif p.name == 'solver.substeps':
+                self.substeps = int(p.value)
+            elif p.name == 'solver.strain_limit':
+                self.solver.strain_limit = float(p.value) if p.value > 0 else None
         return SetParametersResult(successful=True)
 
     def _on_pose(self, gripper, msg):

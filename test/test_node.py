@@ -158,3 +158,22 @@ def test_bad_gripper_commands_are_dropped_and_node_lives(graph):
     assert not g.grasping
     assert g.translation is not None and g.translation[2] == pytest.approx(1.1999)
     assert np.all(np.isfinite(points_from_pointcloud2(clouds[-1])))
+
+
+def test_runtime_solver_parameters_take_effect(graph):
+    sim, _, clouds, _, spin_until, _ = graph
+    ok = sim.set_parameters([Parameter('solver.dt', value=0.005),
+                             Parameter('solver.substeps', value=2),
+                             Parameter('solver.strain_limit', value=0.0)])
+    assert all(r.successful for r in ok)
+    t0 = sim.state.time
+    clouds.clear()
+    assert spin_until(lambda: len(clouds) >= 5)
+    ticks = len(clouds)
+    # each tick now advances 2 x 5 ms (within the ticks that ran while we counted)
+    assert sim.state.time - t0 == pytest.approx(0.01 * ticks, abs=0.02)
+    assert sim.solver.strain_limit is None
+    refused = sim.set_parameters([Parameter('solver.dt', value=5.0)])
+    assert not refused[0].successful and sim.dt == 0.005
+    read_only = sim.set_parameters([Parameter('cloth.levels', value=2)])
+    assert not read_only[0].successful and sim.model.level_count == 4

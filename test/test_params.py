@@ -54,3 +54,10 @@ def test_defaults_are_the_hanging_scene():
     hanging = params.resolve(params.load_file(os.path.join(CONFIG, 'hanging.yaml')))
     for name, value in hanging.items():
         assert np.all(np.asarray(defaults[name]) == np.asarray(value)), name
+
+
+def test_readme_documents_every_parameter():
+    from hcloth_ros.node import NODE_PARAMS
+    readme = open(os.path.join(os.path.dirname(CONFIG), 'README.md')).read()
+    missing = [p.name for p in params.PARAMS + NODE_PARAMS if f'| `{p.name}` |' not in readme]
+    assert missing == []
