@@ -41,6 +41,7 @@ from visualization_msgs.msg import Marker
 
 from hcloth_ros import params
 from hcloth_ros.core import warm_up
+from hcloth_ros.core.solvers import prolong_state
 from hcloth_ros.core.control import PINNED, quaternion_to_matrix
 from hcloth_ros.recorder import Recorder
 from hcloth_ros.ros_msgs import pointcloud2, triangle_marker
@@ -128,6 +129,10 @@ class ClothSimNode(Node):
             self.recorder = Recorder(self.model, path=path, url=url,
                                      finest_every=self.get_parameter('rerun_finest_every').value)
             self.get_logger().info(f'recording to {path or url}')
+        self.period = 1.0 / self.get_parameter('rate_hz').value
+        self.top_level = self.model.level_count - 1
+        self.level_cap = self.top_level      # the real-time governor's ceiling
+        self._overruns = self._headroom = 0
         self.timer = self.create_timer(1.0 / self.get_parameter('rate_hz').value, self._tick)
         lv = self.model.level(self.model.level_count - 1)
         self.get_logger().info(
@@ -219,8 +224,49 @@ class ClothSimNode(Node):
         return response
 
     # --- the timer -----------------------------------------------------------------------
+    def _finest_needed(self):
+        """The finest level anyone consumes: all of them for a cloud subscriber or a
+        recording, else only up to the LOD marker's level."""
+        if self.recorder is not None or self.cloud_pub.get_subscription_count() > 0:
+            return self.top_level
+        return self.lod_level
+
+    def _govern(self, tick_seconds):
+        """Drop the finest simulated level after 3 ticks in a row overran the period;
+        restore it after 60 ticks in a row that would fit 4x the work (a level has about 4x
+        the points of the one below) in 80 % of the period."""
+        if tick_seconds > self.period:
+            self._overruns, self._headroom = self._overruns + 1, 0
+        elif 4 * tick_seconds < 0.8 * self.period:
+            self._overruns, self._headroom = 0, self._headroom + 1
+        else:
+            self._overruns = self._headroom = 0
+        if self._overruns >= 3 and self.level_cap > self.lod_level:
+            self.level_cap -= 1
+            self._overruns = 0
+            self.get_logger().warning(
+                f'ticks overrun the {self.period * 1e3:.1f} ms period: simulating up to level '
+                f'{self.level_cap}', throttle_duration_sec=1.0)
+        elif self._headroom >= 60 and self.level_cap < self.top_level:
+            self.level_cap += 1
+            self._headroom = 0
+            self.get_logger().info(f'headroom again: simulating up to level {self.level_cap}')
+
+    def _set_levels(self):
+        """Simulate only the levels consumed (hierarchical solver); a level that comes
+        back starts from the coarser state, so nothing jumps."""
+        if self.solver.name != 'hierarchical':
+            return
+        finest = max(min(self._finest_needed(), self.level_cap), self.lod_level)
+        for k in range(self.solver.finest_level + 1, finest + 1):
+            prolong_state(self.state, k)
+        if finest != self.solver.finest_level:
+            self.get_logger().info(f'simulating levels 0..{finest}')
+            self.solver.finest_level = finest
+
     def _tick(self):
         start = time.perf_counter()
+        self._set_levels()
         self._apply_grippers()
         for _ in range(self.substeps):
             report = self.solver.step(self.state, self.control, self.dt)
@@ -229,15 +275,17 @@ class ClothSimNode(Node):
                 break
         stamp = self.get_clock().now().to_msg()
         finest = self.solver.levels()[-1]
-        self.cloud_pub.publish(pointcloud2(self.state.points_by_id(self.model, finest),
-                                           self.frame_id, stamp))
-        k = self.lod_level
+        if self.cloud_pub.get_subscription_count() > 0:
+            self.cloud_pub.publish(pointcloud2(self.state.points_by_id(self.model, finest),
+                                               self.frame_id, stamp))
+        k = min(self.lod_level, finest) if self.solver.name == 'hierarchical' else finest
         self.marker_pub.publish(triangle_marker(self.state.points(k),
                                                 self.model.grid_triangles(k), self.frame_id,
                                                 stamp, ns='hcloth_lod', marker_id=0))
         if self.recorder is not None:
             self.recorder.log_step(self.state, finest, k, report, time.perf_counter() - start,
                                    self.dt * self.substeps, self._held_points(finest))
+        self._govern(time.perf_counter() - start)
 
     def _held_points(self, k):
         kind = self.control.holds(k).kind.ravel()

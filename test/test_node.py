@@ -177,3 +177,69 @@ def test_runtime_solver_parameters_take_effect(graph):
     assert not refused[0].successful and sim.dt == 0.005
     read_only = sim.set_parameters([Parameter('cloth.levels', value=2)])
     assert not read_only[0].successful and sim.model.level_count == 4
+
+
+def test_simulates_only_consumed_levels_and_refines_without_a_jump():
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    try:
+        sim = ClothSimNode(context=context)
+        executor = SingleThreadedExecutor(context=context)
+        executor.add_node(sim)
+        end = time.monotonic() + 10
+        while sim.state.time < 0.3 and time.monotonic() < end:
+            executor.spin_once(timeout_sec=0.05)
+        # nobody takes the cloud and nothing records: levels 0 .. lod_level only
+        assert sim.solver.finest_level == sim.lod_level == 1
+        frozen = sim.state.q[3].copy()
+        probe = rclpy.create_node('probe', context=context)
+        clouds = []
+        probe.create_subscription(PointCloud2, 'cloth/points', clouds.append,
+                                  qos_profile_sensor_data)
+        executor.add_node(probe)
+        while not clouds and time.monotonic() < end:
+            executor.spin_once(timeout_sec=0.05)
+        assert sim.solver.finest_level == 3 and clouds
+        assert not np.array_equal(sim.state.q[3], frozen)      # the stale level moved on
+        # the first cloud after refining: its level-1 prefix is exactly the level-1 mesh
+        # and every finer point sits within one step of motion of the interpolated coarse
+        # shape (no jump back to the stale state of 0.3 s ago)
+        pts = points_from_pointcloud2(clouds[0])
+        lv1 = sim.model.level(1).point_count
+        coarse = sim.state.points_by_id(sim.model, 1)
+        assert np.allclose(pts[:lv1], coarse, atol=1e-5)
+        stale = frozen.reshape(3, -1).T[sim.model.level(3).id_to_grid]
+        assert np.abs(pts - stale).max() > 0.1
+        executor.shutdown()
+        sim.destroy_node()
+        probe.destroy_node()
+    finally:
+        rclpy.shutdown(context=context)
+
+
+def test_governor_drops_levels_when_ticks_overrun():
+    # at 1000 Hz a 65 x 65 tick (about 1 ms of stepping plus packing) cannot keep up
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    try:
+        sim = ClothSimNode(context=context,
+                           parameter_overrides=[Parameter('rate_hz', value=1000.0),
+                                                Parameter('lod_level', value=0)])
+        probe = rclpy.create_node('probe', context=context)
+        probe.create_subscription(PointCloud2, 'cloth/points', lambda m: None,
+                                  qos_profile_sensor_data)
+        executor = SingleThreadedExecutor(context=context)
+        executor.add_node(sim)
+        executor.add_node(probe)
+        end = time.monotonic() + 5
+        while sim.level_cap == 3 and time.monotonic() < end:
+            executor.spin_once(timeout_sec=0.01)
+        assert sim.level_cap < 3
+        while sim.solver.finest_level > sim.level_cap and time.monotonic() < end:
+            executor.spin_once(timeout_sec=0.01)     # applied at the next tick
+        assert sim.solver.finest_level <= sim.level_cap
+        executor.shutdown()
+        sim.destroy_node()
+        probe.destroy_node()
+    finally:
+        rclpy.shutdown(context=context)
