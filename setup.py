@@ -26,6 +26,8 @@ setup(
         'console_scripts': [
             'sim_node = hcloth_ros.node:main',
             'hcloth_demo = hcloth_ros.demo:main',
+            'hcloth_demo_run = hcloth_ros.demo_run:main',
+            'hcloth_fold_client = hcloth_ros.demo_client:main',
             'hcloth_engine_bench = hcloth_ros.bench_engine:main',
         ],
     },

@@ -29,3 +29,29 @@ def test_demo_simulation_follows_the_scene():
     assert curves['com_z'][-1] < 1.5 - 0.05
     pins = model.level(3).id_to_grid[[0, 8]]
     assert np.array_equal(s0.points(3)[pins], s1.points(3)[pins])
+
+
+def test_fold_demo_folds_the_cloth_and_leaves_a_recording(tmp_path, monkeypatch):
+    # The README's run command: node + scripted client in separate processes over DDS.
+    # After the fold the two corners that started at y = -0.5 lie near the far edge
+    # (y > 0.3) on the ground, so the cloth is doubled over: its y extent has halved.
+    import random
+    import sys
+
+    from rerun.chunk import RrdReader
+
+    from hcloth_ros import demo_run
+    monkeypatch.setenv('ROS_DOMAIN_ID', str(random.randint(100, 200)))
+    monkeypatch.setenv('AMENT_PREFIX_PATH', sys.prefix)
+    out = str(tmp_path / 'fold.rrd')
+    assert demo_run.main(['--out', out]) == 0
+    last = None
+    for chunk in RrdReader(out).stream():
+        batch = chunk.to_record_batch()
+        if chunk.entity_path == '/cloth/finest' and \
+                'Mesh3D:vertex_positions' in batch.schema.names:
+            last = batch.column('Mesh3D:vertex_positions').to_pylist()[-1]
+    grid = np.array(last).reshape(65, 65, 3)
+    assert grid[0, 0, 1] > 0.3 and grid[0, -1, 1] > 0.3
+    assert grid[0, 0, 2] < 0.05 and grid[0, -1, 2] < 0.05
+    assert np.ptp(grid[..., 1]) < 0.7
