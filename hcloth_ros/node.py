@@ -101,6 +101,8 @@ class ClothSimNode(Node):
                                  for spec in params.PARAMS})
         self.model, self.solver, self.state, self.control = params.build_all(values)
         self.initial = self.state.copy()
+        # triangle lists never change: built once, not per tick
+        self.triangles = [self.model.grid_triangles(k) for k in range(self.model.level_count)]
         self.dt = float(values['solver.dt'])
         self.substeps = int(values['solver.substeps'])
         self.frame_id = self.get_parameter('frame_id').value
@@ -279,9 +281,9 @@ class ClothSimNode(Node):
             self.cloud_pub.publish(pointcloud2(self.state.points_by_id(self.model, finest),
                                                self.frame_id, stamp))
         k = min(self.lod_level, finest) if self.solver.name == 'hierarchical' else finest
-        self.marker_pub.publish(triangle_marker(self.state.points(k),
-                                                self.model.grid_triangles(k), self.frame_id,
-                                                stamp, ns='hcloth_lod', marker_id=0))
+        self.marker_pub.publish(triangle_marker(self.state.points(k), self.triangles[k],
+                                                self.frame_id, stamp, ns='hcloth_lod',
+                                                marker_id=0))
         if self.recorder is not None:
             self.recorder.log_step(self.state, finest, k, report, time.perf_counter() - start,
                                    self.dt * self.substeps, self._held_points(finest))
