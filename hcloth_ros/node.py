@@ -262,6 +262,7 @@ class ClothSimNode(Node):
         finest = max(min(self._finest_needed(), self.level_cap), self.lod_level)
         for k in range(self.solver.finest_level + 1, finest + 1):
             prolong_state(self.state, k)
+            self.control.recapture(self.state, k)
         if finest != self.solver.finest_level:
             self.get_logger().info(f'simulating levels 0..{finest}')
             self.solver.finest_level = finest

@@ -361,3 +361,25 @@ def test_hierarchical_runs_are_bit_identical(restore_threads):
     assert a.time == b.time == c.time
     # not vacuous: the cloth moved (free corner far from the pins fell > 10 cm in 0.83 s)
     assert 1.0 - a.q[2][2, -1, -1] > 0.1
+
+
+def test_recapture_keeps_a_restarted_level_in_place_and_rigid():
+    # A grasp taken while level 2 was stale: after prolonging level 2 from level 1 and
+    # recapturing, one step leaves the grasped level-2 points exactly at R local + p with
+    # the fresh local coordinates, i.e. where they were (frame unmoved), not at the stale
+    # positions.
+    from hcloth_ros.core.solvers import prolong_state
+    model = ClothBuilder(resolution=(3, 3), level_count=3).finalize()
+    state, control = State.at_rest(model), Control(model)
+    solver = make_solver('hierarchical', model, finest_level=1)
+    for _ in range(20):
+        assert solver.step(state, control, 1 / 60).ok     # level 2 stays at rest: stale
+    control.grasp('g', [24], state, np.eye(3), state.position_of(model, 24, 2))
+    prolong_state(state, 2)
+    control.recapture(state, 2)
+    held = control.holds(2).drive_index
+    before = state.q[2].reshape(3, -1)[:, held].copy()
+    solver.finest_level = 2
+    assert solver.step(state, control, 1 / 60).ok
+    after = state.q[2].reshape(3, -1)[:, held]
+    assert np.allclose(after, before, atol=1e-12)

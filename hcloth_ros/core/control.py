@@ -154,6 +154,17 @@ class Control:
         g = self._grasps[name]
         g.rotation, g.translation = rotation, translation
 
+    def recapture(self, state, k):
+        """Re-take every grasp's frame coordinates on level k from its current state.
+
+        A level that was not simulated when a grasp closed holds stale coordinates; after
+        it is restarted from the coarser state (``prolong_state``) this keeps its grasped
+        points where they are and rigid with the frame from now on, instead of jumping.
+        """
+        for g in self._grasps.values():
+            x = state.q[k].reshape(3, -1)[:, g.grid_index[k]]
+            g.local[k] = np.ascontiguousarray(g.rotation.T @ (x - g.translation[:, None]))
+
     def release(self, name):
         if self._grasps.pop(name, None) is not None:
             self._touch()
