@@ -28,6 +28,7 @@ setup(
             'hcloth_demo = hcloth_ros.demo:main',
             'hcloth_demo_run = hcloth_ros.demo_run:main',
             'hcloth_fold_client = hcloth_ros.demo_client:main',
+            'hcloth_node_bench = hcloth_ros.bench_node:main',
             'hcloth_engine_bench = hcloth_ros.bench_engine:main',
         ],
     },
