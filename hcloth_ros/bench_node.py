@@ -77,7 +77,7 @@ def main(argv=None):
     args = parser.parse_args(argv)
     import numba
     print(f'node benchmark: {args.rate:g} Hz, {args.seconds:g} s a size, numba '
-          f'{numba.__version__} with {numba.get_num_threads()} threads, load average '
+          f'{numba.__version__} (node default numba_threads = 1), load average '
           f'{os.getloadavg()[0]:.2f} on {os.cpu_count()} CPUs', flush=True)
     results = {}
     for size in args.sizes.split(','):
