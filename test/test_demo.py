@@ -51,7 +51,11 @@ def test_fold_demo_folds_the_cloth_and_leaves_a_recording(tmp_path, monkeypatch)
         if chunk.entity_path == '/cloth/finest' and \
                 'Mesh3D:vertex_positions' in batch.schema.names:
             last = batch.column('Mesh3D:vertex_positions').to_pylist()[-1]
-    grid = np.array(last).reshape(65, 65, 3)
+    # the governor may have simulated fewer levels on a busy machine: any level is a
+    # square grid of the same cloth
+    points = np.array(last)
+    side = int(round(np.sqrt(len(points))))
+    grid = points.reshape(side, side, 3)
     assert grid[0, 0, 1] > 0.3 and grid[0, -1, 1] > 0.3
     assert grid[0, 0, 2] < 0.05 and grid[0, -1, 2] < 0.05
     assert np.ptp(grid[..., 1]) < 0.7
