@@ -142,8 +142,11 @@ class ClothSimNode(Node):
         self.dt = float(values['solver.dt'])
         self.substeps = int(values['solver.substeps'])
         self.frame_id = self.get_parameter('frame_id').value
-        self.lod_level = min(self.get_parameter('lod_level').value,
-                             self.model.level_count - 1)
+        self.lod_level = self.get_parameter('lod_level').value
+        if self.lod_level >= self.model.level_count:
+            self.get_logger().warning(f'lod_level {self.lod_level} beyond the finest level '
+                                      f'{self.model.level_count - 1}: using the finest')
+            self.lod_level = self.model.level_count - 1
         threads = min(self.get_parameter('numba_threads').value, numba.config.NUMBA_NUM_THREADS)
         numba.set_num_threads(threads)
         self.get_logger().info(f'numba kernels ready in {warm_up():.2f} s, {threads} thread(s)')
@@ -180,8 +183,8 @@ class ClothSimNode(Node):
         self.level_cap = self.top_level      # the real-time governor's ceiling
         self._overruns = self._headroom = 0
         self._grace = 30
-        self.timer = self.create_timer(1.0 / self.get_parameter('rate_hz').value, self._tick)
-        lv = self.model.level(self.model.level_count - 1)
+        self.timer = self.create_timer(self.period, self._tick)
+        lv = self.model.level(self.top_level)
         self.get_logger().info(
             f'{self.solver.name} cloth, {self.model.level_count} levels, finest '
             f'{lv.rows}x{lv.cols}, dt {self.dt * 1e3:.2f} ms x {self.substeps} per tick')
@@ -196,12 +199,18 @@ class ClothSimNode(Node):
                     successful=False,
                     reason=f'lod_level {p.value} out of range 0..{self.model.level_count - 1}')
             if p.name == 'pinned_points':
-                try:
-                    self.control.set_pins(params.pin_ids(p.value))
-                except (IndexError, ValueError) as e:
-                    return SetParametersResult(successful=False, reason=str(e))
-        for p in changes:     # every change is valid: apply them all
-            if p.name == 'lod_level':
+                bad = [i for i in params.pin_ids(p.value)
+                       if not 0 <= i < self.model.point_count]
+                if bad:
+                    return SetParametersResult(
+                        successful=False, reason=f'pinned_points {bad[:5]} out of range '
+                        f'0..{self.model.point_count - 1}')
+        # every change is valid: apply them all (nothing was changed while checking, so a
+        # refused batch leaves the node as it was)
+        for p in changes:
+            if p.name == 'pinned_points':
+                self.control.set_pins(params.pin_ids(p.value))
+            elif p.name == 'lod_level':
                 self.lod_level = p.value
             elif p.name == 'solver.dt':
                 self.dt = float(p.value)

@@ -5,10 +5,12 @@ import time
 import numpy as np
 import pytest
 import rclpy
+from geometry_msgs.msg import PoseStamped
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.parameter import Parameter
 from rclpy.qos import qos_profile_sensor_data
 from sensor_msgs.msg import PointCloud2
+from std_msgs.msg import Bool
 from std_srvs.srv import Trigger
 from visualization_msgs.msg import Marker
 
@@ -74,6 +76,10 @@ def test_bad_pins_refused_and_reset_restores(graph):
     bad = sim.set_parameters([Parameter('pinned_points', value=[0, 10 ** 6])])
     assert not bad[0].successful and 'out of range' in bad[0].reason
     assert list(sim.control.pins) == [0, 8]
+    # a refused batch changes nothing, not even its valid members
+    batch = sim.set_parameters_atomically([Parameter('pinned_points', value=[0]),
+                                           Parameter('lod_level', value=99)])
+    assert not batch.successful and list(sim.control.pins) == [0, 8]
     assert spin_until(lambda: len(clouds) >= 10)
     client = probe.create_client(Trigger, 'cloth/reset')
     assert client.wait_for_service(timeout_sec=5.0)
@@ -83,8 +89,12 @@ def test_bad_pins_refused_and_reset_restores(graph):
     assert np.array_equal(sim.state.q[3], sim.initial.q[3])
 
 
+def _gripper_publishers(probe, name):
+    return (probe.create_publisher(PoseStamped, f'cloth/grippers/{name}/pose', 10),
+            probe.create_publisher(Bool, f'cloth/grippers/{name}/close', 10))
+
+
 def _pose(probe_time, xyz, quat=(0.0, 0.0, 0.0, 1.0), frame='world'):
-    from geometry_msgs.msg import PoseStamped
     msg = PoseStamped()
     msg.header.frame_id = frame
     msg.header.stamp = probe_time
@@ -95,11 +105,8 @@ def _pose(probe_time, xyz, quat=(0.0, 0.0, 0.0, 1.0), frame='world'):
 
 
 def test_gripper_grasps_carries_rigidly_and_releases(graph):
-    from geometry_msgs.msg import PoseStamped
-    from std_msgs.msg import Bool
     sim, probe, clouds, _, spin_until, _ = graph
-    pose_pub = probe.create_publisher(PoseStamped, 'cloth/grippers/left/pose', 10)
-    close_pub = probe.create_publisher(Bool, 'cloth/grippers/left/close', 10)
+    pose_pub, close_pub = _gripper_publishers(probe, 'left')
     spin_until(lambda: len(clouds) >= 5)
     now = probe.get_clock().now().to_msg()
     corner = sim.state.points_by_id(sim.model, 3)[80]          # a free level-0 corner
@@ -135,11 +142,8 @@ def test_gripper_grasps_carries_rigidly_and_releases(graph):
 
 
 def test_bad_gripper_commands_are_dropped_and_node_lives(graph):
-    from geometry_msgs.msg import PoseStamped
-    from std_msgs.msg import Bool
     sim, probe, clouds, _, spin_until, _ = graph
-    pose_pub = probe.create_publisher(PoseStamped, 'cloth/grippers/right/pose', 10)
-    close_pub = probe.create_publisher(Bool, 'cloth/grippers/right/close', 10)
+    pose_pub, close_pub = _gripper_publishers(probe, 'right')
     spin_until(lambda: len(clouds) >= 3)
     now = probe.get_clock().now().to_msg()
     close_pub.publish(Bool(data=True))                 # close before any pose
