@@ -26,6 +26,7 @@ every grasp.
 import gc
 import json
 import os
+import signal
 import time
 from collections import deque
 from dataclasses import dataclass, field
@@ -39,6 +40,7 @@ from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescr
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, qos_profile_sensor_data
+from rclpy.signals import SignalHandlerOptions
 from sensor_msgs.msg import PointCloud2
 from std_msgs.msg import Bool
 from std_srvs.srv import Trigger
@@ -49,7 +51,7 @@ from hcloth_ros.core import warm_up
 from hcloth_ros.core.solvers import prolong_state
 from hcloth_ros.core.control import PINNED, quaternion_to_matrix
 from hcloth_ros.recorder import Recorder
-from hcloth_ros.ros_msgs import pointcloud2, triangle_marker
+from hcloth_ros.ros_msgs import TriangleMarker, pointcloud2
 
 NODE_PARAMS = [
     params.Param('rate_hz', 60.0, 'timer rate: steps and publications per second (Hz)',
@@ -134,12 +136,12 @@ class ClothSimNode(Node):
         self.add_on_set_parameters_callback(self._on_set_parameters)
         for spec in params.PARAMS + NODE_PARAMS:
             self.declare_parameter(spec.name, spec.default, _descriptor(spec))
+        self._warn_unknown_overrides()
         values = params.resolve({spec.name: self.get_parameter(spec.name).value
                                  for spec in params.PARAMS})
         self.model, self.solver, self.state, self.control = params.build_all(values)
         self.initial = self.state.copy()
-        # triangle lists never change: built once, not per tick
-        self.triangles = [self.model.grid_triangles(k) for k in range(self.model.level_count)]
+        self._markers = {}      # level -> TriangleMarker, built on first use
         self.dt = float(values['solver.dt'])
         self.substeps = int(values['solver.substeps'])
         self.frame_id = self.get_parameter('frame_id').value
@@ -172,6 +174,10 @@ class ClothSimNode(Node):
                                      lambda msg, g=g: self._on_pose(g, msg), latest)
             self.create_subscription(Bool, f'cloth/grippers/{name}/close',
                                      lambda msg, g=g: self._on_close(g, msg), latest)
+        # commands to a gripper name nobody declared reach no subscriber: look for them
+        self._gripper_prefix = self.resolve_topic_name('cloth/grippers') + '/'
+        self._reported_unknown = set()
+        self.create_timer(1.0, self._check_unknown_grippers)
         self.stats = TickStats()
         self.recorder = None
         path, url = self.get_parameter('rerun_path').value, self.get_parameter('rerun_url').value
@@ -191,6 +197,18 @@ class ClothSimNode(Node):
             f'{lv.rows}x{lv.cols}, dt {self.dt * 1e3:.2f} ms x {self.substeps} per tick')
 
     # --- parameters and services -------------------------------------------------------
+    def _warn_unknown_overrides(self):
+        """rclpy silently ignores overrides (params file, -p) that match no declared
+        parameter, so a misspelt ``cloth.widht`` would leave the default in place unseen."""
+        # rclpy has no public accessor for the overrides it was given
+        given = getattr(self, '_parameter_overrides', {})
+        unknown = sorted(n for n in given
+                         if not self.has_parameter(n) and not n.startswith('qos_overrides.'))
+        if unknown:
+            self.get_logger().error(f'unknown parameters ignored: {", ".join(unknown)} '
+                                    '(see the README parameter table)')
+        return unknown
+
     def _on_set_parameters(self, changes):
         if not hasattr(self, 'model'):
             return SetParametersResult(successful=True)     # initial declaration
@@ -239,6 +257,20 @@ class ClothSimNode(Node):
             return
         gripper.rotation, gripper.translation = rotation, translation
         gripper.pose_pending = True
+
+    def _check_unknown_grippers(self):
+        """Name (once each) gripper topics that someone publishes to but that are not in
+        ``grippers``: ROS delivers them nowhere, so the sender would otherwise never know."""
+        for topic, _ in self.get_topic_names_and_types():
+            if not topic.startswith(self._gripper_prefix) or topic in self._reported_unknown:
+                continue
+            name = topic[len(self._gripper_prefix):].rsplit('/', 1)[0]
+            if name not in self.grippers and self.count_publishers(topic) > 0:
+                self._reported_unknown.add(topic)
+                self.get_logger().error(
+                    f'{topic} has publishers but gripper {name!r} is not in grippers '
+                    f'{sorted(self.grippers)}: its commands are not received')
+        return sorted(self._reported_unknown)
 
     def _on_close(self, gripper, msg):
         gripper.close_request = bool(msg.data)
@@ -346,8 +378,7 @@ class ClothSimNode(Node):
             cloud = pointcloud2(self.state.points_by_id(self.model, finest), self.frame_id,
                                 stamp)
         k = min(self.lod_level, finest) if self.solver.name == 'hierarchical' else finest
-        marker = triangle_marker(self.state.points(k), self.triangles[k], self.frame_id,
-                                 stamp, ns='hcloth_lod', marker_id=0)
+        marker = self._marker(k).update(self.state.points(k), stamp)
         t2 = time.perf_counter()
         if cloud is not None:
             self.cloud_pub.publish(cloud)
@@ -361,18 +392,30 @@ class ClothSimNode(Node):
                        tick=t4 - t0, levels=finest + 1, sim_time=self.state.time)
         self._govern(t4 - t0)
 
+    def _marker(self, k):
+        if k not in self._markers:
+            self._markers[k] = TriangleMarker(self.model.grid_triangles(k), self.frame_id,
+                                              ns='hcloth_lod', marker_id=0)
+        return self._markers[k]
+
     def _held_points(self, k):
         kind = self.control.holds(k).kind.ravel()
         pts = self.state.points(k)
         return {'pins': pts[kind == PINNED], 'grasps': pts[kind > PINNED]}
 
     def destroy_node(self):
-        if self.stats.count:
+        # also called by the context's shutdown on a node whose __init__ was interrupted
+        # (Ctrl-C during warm-up): only what exists is reported and closed
+        if getattr(self, 'stats', None) is not None and self.stats.count:
             self.get_logger().info(f'tick stats {json.dumps(self.stats.summary())}')
-        if self.recorder is not None:
+        if getattr(self, 'recorder', None) is not None:
             self.recorder.close()
             self.recorder = None
         super().destroy_node()
+
+
+def _interrupt(signum, frame):
+    raise KeyboardInterrupt(f'signal {signum}')
 
 
 def main(args=None):
@@ -382,7 +425,14 @@ def main(args=None):
     # NUMBA_THREADING_LAYER in the environment still wins.
     if 'NUMBA_THREADING_LAYER' not in os.environ:
         numba.config.THREADING_LAYER = 'workqueue'
-    rclpy.init(args=args)
+    # Ctrl-C and SIGTERM end the spin with an exception while the context is still valid,
+    # so the tick statistics and the end of the recording are logged through a live node
+    # (rclpy's own handlers shut the context down first: "publisher's context is invalid").
+    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+    # explicitly for SIGINT too: a shell starts background jobs with SIGINT ignored, and
+    # Python then keeps it ignored
+    for signum in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(signum, _interrupt)
     node = None
     try:
         node = ClothSimNode()

@@ -17,10 +17,23 @@ import rerun.blueprint as rrb
 from hcloth_ros.core.metrics import energy
 
 
+METRICS = (('step_ms', 'step time (ms)'), ('real_time_factor', 'real-time factor'),
+           ('levels', 'levels simulated'), ('max_strain', 'largest strain'),
+           ('energy', 'energy (J)'))
+
+
 def _blueprint():
-    return rrb.Blueprint(rrb.Horizontal(rrb.Spatial3DView(origin='/cloth', name='cloth'),
-                                        rrb.TimeSeriesView(origin='/metrics', name='metrics'),
-                                        column_shares=[2, 1]))
+    """The finest mesh and the LOD mesh side by side (held points in both), one plot per
+    metric (their units differ), the ``sim_time`` timeline selected."""
+    held = ['+ /cloth/pins', '+ /cloth/grasps']
+    meshes = rrb.Vertical(
+        rrb.Spatial3DView(origin='/', name='finest level',
+                          contents=['+ /cloth/finest'] + held),
+        rrb.Spatial3DView(origin='/', name='LOD marker level', contents=['+ /cloth/lod'] + held))
+    plots = rrb.Vertical(*(rrb.TimeSeriesView(origin=f'/metrics/{name}', name=title)
+                           for name, title in METRICS))
+    return rrb.Blueprint(rrb.Horizontal(meshes, plots, column_shares=[3, 2]),
+                         rrb.TimePanel(timeline='sim_time'), collapse_panels=True)
 
 
 class Recorder:
@@ -65,10 +78,11 @@ class Recorder:
             self.rec.log(f'cloth/{name}', rr.Points3D(points, radii=0.01))
         kin, pot, ela = energy(self.model, state, finest)
         rtf = simulated_seconds / wall_seconds if wall_seconds > 0 else 0.0
-        for name, value in (('step_ms', report.seconds * 1e3), ('real_time_factor', rtf),
-                            ('levels', len(report.levels)), ('max_strain', report.max_strain),
-                            ('energy', kin + pot + ela)):
-            self.rec.log(f'metrics/{name}', rr.Scalars(float(value)))
+        values = {'step_ms': report.seconds * 1e3, 'real_time_factor': rtf,
+                  'levels': len(report.levels), 'max_strain': report.max_strain,
+                  'energy': kin + pot + ela}
+        for name, _ in METRICS:
+            self.rec.log(f'metrics/{name}', rr.Scalars(float(values[name])))
         self._steps += 1
         if time.monotonic() - self._last_flush > self.flush_period:
             self.rec.flush()

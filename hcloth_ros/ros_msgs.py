@@ -49,25 +49,39 @@ def points_from_pointcloud2(msg):
     return raw[:, :12].copy().view('<f4').reshape(n, 3).astype(np.float64)
 
 
-def triangle_marker(points, triangles, frame_id, stamp, ns='cloth', marker_id=0,
-                    rgba=(1.0, 0.55, 0.1, 1.0)):
-    """A ``TRIANGLE_LIST`` marker: three ``points`` entries per triangle (metres).
+class TriangleMarker:
+    """A ``TRIANGLE_LIST`` marker of one mesh topology, refilled in place every tick.
 
-    ``Marker.points`` is a list of Python ``Point`` objects, which costs about a
-    microsecond each to build: meant for the coarse levels a viewer shows, not for the
-    finest mesh (that goes out as a ``PointCloud2``).
+    ``Marker.points`` is a list of Python ``Point`` objects: building them afresh cost
+    about 6 ms for a 33 x 33 level here. This keeps one ``Point`` per vertex, which the
+    list references once per triangle corner (three entries per triangle, as the message
+    wants), so a tick only writes each vertex's coordinates: about 4x faster. The message
+    is serialised when published, so reusing it for the next tick is safe.
     """
-    corners = np.asarray(points, dtype=np.float64)[np.asarray(triangles).ravel()]
-    msg = Marker()
-    msg.header.frame_id = frame_id
-    msg.header.stamp = stamp
-    msg.ns = ns
-    msg.id = int(marker_id)
-    msg.type = Marker.TRIANGLE_LIST
-    msg.action = Marker.ADD
-    msg.pose.orientation.w = 1.0
-    msg.scale.x = msg.scale.y = msg.scale.z = 1.0
-    msg.color = ColorRGBA(r=float(rgba[0]), g=float(rgba[1]), b=float(rgba[2]),
-                          a=float(rgba[3]))
-    msg.points = [Point(x=x, y=y, z=z) for x, y, z in corners.tolist()]
-    return msg
+
+    def __init__(self, triangles, frame_id, ns='cloth', marker_id=0,
+                 rgba=(1.0, 0.55, 0.1, 1.0)):
+        triangles = np.asarray(triangles)
+        self.vertex_count = int(triangles.max()) + 1 if triangles.size else 0
+        self._vertices = [Point(check_fields=False) for _ in range(self.vertex_count)]
+        msg = self.msg = Marker(check_fields=False)
+        msg.header.frame_id = frame_id
+        msg.ns = ns
+        msg.id = int(marker_id)
+        msg.type = Marker.TRIANGLE_LIST
+        msg.action = Marker.ADD
+        msg.pose.orientation.w = 1.0
+        msg.scale.x = msg.scale.y = msg.scale.z = 1.0
+        msg.color = ColorRGBA(r=float(rgba[0]), g=float(rgba[1]), b=float(rgba[2]),
+                              a=float(rgba[3]))
+        msg.points = [self._vertices[i] for i in triangles.ravel().tolist()]
+
+    def update(self, points, stamp):
+        """The marker with the vertices at ``points`` (``(n, 3)`` metres, vertex order)."""
+        points = np.asarray(points, dtype=np.float64)
+        if points.shape != (self.vertex_count, 3):
+            raise ValueError(f'expected ({self.vertex_count}, 3) points, got {points.shape}')
+        for p, (x, y, z) in zip(self._vertices, points.tolist()):
+            p.x, p.y, p.z = x, y, z
+        self.msg.header.stamp = stamp
+        return self.msg

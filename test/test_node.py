@@ -162,6 +162,23 @@ def test_bad_gripper_commands_are_dropped_and_node_lives(graph):
     assert not g.grasping
     assert g.translation is not None and g.translation[2] == pytest.approx(1.1999)
     assert np.all(np.isfinite(points_from_pointcloud2(clouds[-1])))
+    # commands to a gripper that was never declared reach nobody: the node names the topic
+    _gripper_publishers(probe, 'thumb')
+    assert spin_until(lambda: sim._check_unknown_grippers(), timeout=5.0)
+    assert sim._check_unknown_grippers() == ['/cloth/grippers/thumb/close',
+                                             '/cloth/grippers/thumb/pose']
+
+
+def test_duplicate_and_malformed_gripper_names_are_refused():
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    try:
+        sim = ClothSimNode(context=context, parameter_overrides=[
+            Parameter('grippers', value=['a', 'b', 'a', '', 'c/d', 'e', 'f'])])
+        assert sorted(sim.grippers) == ['a', 'b', 'e', 'f']     # at least four at once
+        sim.destroy_node()
+    finally:
+        rclpy.shutdown(context=context)
 
 
 def test_runtime_solver_parameters_take_effect(graph):
@@ -245,5 +262,22 @@ def test_governor_drops_levels_when_ticks_overrun():
         executor.shutdown()
         sim.destroy_node()
         probe.destroy_node()
+    finally:
+        rclpy.shutdown(context=context)
+
+
+def test_unknown_parameters_in_a_params_file_are_reported(tmp_path):
+    # rclpy ignores an override nobody declares; the node names it instead of running
+    # silently on the default
+    path = tmp_path / 'typo.yaml'
+    path.write_text('hcloth_sim:\n  ros__parameters:\n    cloth:\n      widht: 2.0\n'
+                    '      height: 0.5\n')
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    try:
+        sim = ClothSimNode(context=context, cli_args=['--ros-args', '--params-file', str(path)])
+        assert sim._warn_unknown_overrides() == ['cloth.widht']
+        assert sim.get_parameter('cloth.height').value == 0.5     # the rest still applies
+        sim.destroy_node()
     finally:
         rclpy.shutdown(context=context)

@@ -6,7 +6,7 @@ from builtin_interfaces.msg import Time
 from visualization_msgs.msg import Marker
 
 from hcloth_ros.core import ClothBuilder, State
-from hcloth_ros.ros_msgs import points_from_pointcloud2, pointcloud2, triangle_marker
+from hcloth_ros.ros_msgs import points_from_pointcloud2, pointcloud2, TriangleMarker
 
 
 def test_pointcloud2_round_trip_is_float32_exact():
@@ -34,9 +34,18 @@ def test_triangle_marker_of_a_level_has_three_points_per_triangle():
     model = ClothBuilder(resolution=(3, 4), level_count=2).finalize()
     state = State.at_rest(model)
     tri = model.grid_triangles(1)
-    msg = triangle_marker(state.points(1), tri, 'world', Time(), ns='lod', marker_id=1)
+    marker = TriangleMarker(tri, 'world', ns='lod', marker_id=1)
+    msg = marker.update(state.points(1), Time(sec=3))
     assert msg.type == Marker.TRIANGLE_LIST and msg.ns == 'lod' and msg.id == 1
+    assert msg.header.frame_id == 'world' and msg.header.stamp.sec == 3
     # level 1 of a 3 x 4 level 0 is 7 x 5 points: 2 * 6 * 4 triangles
     assert len(msg.points) == 3 * 2 * 6 * 4 == 3 * len(tri)
-    first = np.array([[p.x, p.y, p.z] for p in msg.points[:3]])
-    assert np.array_equal(first, state.points(1)[tri[0]])
+    corners = np.array([[p.x, p.y, p.z] for p in msg.points])
+    assert np.array_equal(corners, state.points(1)[tri.ravel()])
+    # refilled in place: the next tick's positions replace every corner
+    moved = state.points(1) + [0.0, 0.0, -0.25]
+    msg = marker.update(moved, Time(sec=4))
+    corners = np.array([[p.x, p.y, p.z] for p in msg.points])
+    assert np.array_equal(corners, moved[tri.ravel()]) and msg.header.stamp.sec == 4
+    with pytest.raises(ValueError, match=r'\(35, 3\)'):
+        marker.update(state.points(0), Time())
