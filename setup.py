@@ -13,7 +13,7 @@ setup(
         ('share/' + package_name, ['package.xml']),
         ('share/' + package_name + '/config', glob('config/*.yaml') + glob('config/*.xml')),
     ],
-    install_requires=['setuptools', 'numpy', 'numba', 'pyyaml', 'matplotlib'],
+    install_requires=['setuptools', 'numpy', 'numba', 'pyyaml', 'matplotlib', 'tqdm'],
     zip_safe=True,
     maintainer='hcloth_ros maintainers',
     maintainer_email='maintainers@hcloth-ros.dev',
@@ -21,6 +21,8 @@ setup(
     license='Apache-2.0',
     extras_require={
         'test': ['pytest'],
+        # other simulators the benchmark compares against (hcloth_bench, section peers)
+        'peers': ['mujoco==3.14.0', 'pybullet==3.2.7'],
     },
     entry_points={
         'console_scripts': [
@@ -30,6 +32,7 @@ setup(
             'hcloth_fold_client = hcloth_ros.demo_client:main',
             'hcloth_node_bench = hcloth_ros.bench_node:main',
             'hcloth_engine_bench = hcloth_ros.bench_engine:main',
+            'hcloth_bench = hcloth_ros.bench.__main__:main',
         ],
     },
 )

@@ -14,6 +14,8 @@ alone captures an empty page).
 import argparse
 import base64
 import json
+import os
+import signal
 import subprocess
 import sys
 import tempfile
@@ -57,9 +59,12 @@ def main(argv=None):
     parser.add_argument('--size', default='1600,1000')
     args = parser.parse_args(argv)
     rerun = Path(sys.executable).with_name('rerun')
+    # its own process group: .venv/bin/rerun is a wrapper that starts the real viewer as
+    # a child, which killing the wrapper alone leaves running (at 100 % of a core)
     viewer = subprocess.Popen([str(rerun), '--web-viewer', '--bind', '127.0.0.1',
                                '--web-viewer-port', '9090', '--port', '9876', args.rrd],
-                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                              start_new_session=True)
     with tempfile.TemporaryDirectory() as profile:
         browser = subprocess.Popen(['chromium', *CHROMIUM_FLAGS, f'--user-data-dir={profile}',
                                     f'--window-size={args.size}', '--remote-debugging-port=9333',
@@ -77,7 +82,7 @@ def main(argv=None):
             print(f'wrote {args.png}')
         finally:
             browser.kill()
-            viewer.kill()
+            os.killpg(viewer.pid, signal.SIGTERM)
 
 
 if __name__ == '__main__':

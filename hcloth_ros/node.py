@@ -23,10 +23,12 @@ every grasp.
 ``pinned_points`` may be changed at runtime; scene and cloth parameters are read-only.
 """
 
+import faulthandler
 import gc
 import json
 import os
 import signal
+import threading
 import time
 from collections import deque
 from dataclasses import dataclass, field
@@ -37,7 +39,7 @@ import rclpy
 from geometry_msgs.msg import PoseStamped
 from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor,
                                 SetParametersResult)
-from rclpy.executors import ExternalShutdownException
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, qos_profile_sensor_data
 from rclpy.signals import SignalHandlerOptions
@@ -414,29 +416,40 @@ class ClothSimNode(Node):
         super().destroy_node()
 
 
-def _interrupt(signum, frame):
-    raise KeyboardInterrupt(f'signal {signum}')
+_STOP = threading.Event()
+
+
+def _request_stop(signum, frame):
+    # Only a flag: an exception raised from a signal handler lands in whatever code runs
+    # at that moment, and a handler that swallows it there (seen: Ctrl-C during start-up
+    # lost in 9 of 140 starts, the node then ran on) loses the stop request.
+    _STOP.set()
 
 
 def main(args=None):
+    # Our handlers first: Ctrl-C or SIGTERM at any moment from here on stops the node
+    # after start-up, with the context still valid, so the tick statistics and the end of
+    # the recording go out through a live node (rclpy's own handlers shut the context
+    # down first: "publisher's context is invalid"). Explicitly for SIGINT too: a shell
+    # starts background jobs with SIGINT ignored, and Python keeps it so.
+    for signum in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(signum, _request_stop)
+    # `kill -USR1 <pid>` prints every thread's Python stack: a hung node explains itself
+    faulthandler.register(signal.SIGUSR1, all_threads=True)
     # With the OpenMP threading layer, Ctrl-C right as the timer starts crashed the
-    # process on exit (SIGSEGV in 1 of 12 starts here; 0 of 20 with workqueue). The node
-    # runs one kernel thread by default, where workqueue costs nothing. An explicit
-    # NUMBA_THREADING_LAYER in the environment still wins.
+    # process on exit (SIGSEGV in 1 of 12 starts, with rclpy's signal handlers). The
+    # workqueue layer did not, but costs 2-4x the step at one thread (1.6-3.8 ms against
+    # 0.9 ms on config/fold.yaml). An explicit NUMBA_THREADING_LAYER still wins.
     if 'NUMBA_THREADING_LAYER' not in os.environ:
         numba.config.THREADING_LAYER = 'workqueue'
-    # Ctrl-C and SIGTERM end the spin with an exception while the context is still valid,
-    # so the tick statistics and the end of the recording are logged through a live node
-    # (rclpy's own handlers shut the context down first: "publisher's context is invalid").
     rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
-    # explicitly for SIGINT too: a shell starts background jobs with SIGINT ignored, and
-    # Python then keeps it ignored
-    for signum in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(signum, _interrupt)
     node = None
     try:
         node = ClothSimNode()
-        rclpy.spin(node)
+        executor = SingleThreadedExecutor()
+        executor.add_node(node)
+        while not _STOP.is_set() and rclpy.ok():
+            executor.spin_once(timeout_sec=0.1)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     finally:

@@ -7,7 +7,8 @@ import numba
 import numpy as np
 import pytest
 
-from hcloth_ros.core import SOLVERS, ClothBuilder, Control, State, make_solver
+from hcloth_ros.core import (SOLVERS, ClothBuilder, Control, Placement, State, make_scene,
+                             make_solver)
 
 
 def small_model(levels=2, k=1000.0):
@@ -383,3 +384,40 @@ def test_recapture_keeps_a_restarted_level_in_place_and_rigid():
     assert solver.step(state, control, 1 / 60).ok
     after = state.q[2].reshape(3, -1)[:, held]
     assert np.allclose(after, before, atol=1e-12)
+
+
+def test_grasp_holds_the_footprint_of_inserted_points_on_coarser_levels():
+    model = ClothBuilder(resolution=(3, 3), level_count=3).finalize()
+    inserted = next(i for i in range(model.point_count) if model.intro_level[i] == 2)
+    a, b = model.parents[inserted]
+    assert model.footprint(inserted, 2) == {inserted}
+    assert model.footprint(inserted, 1) == model.footprint(a, 1) | model.footprint(b, 1)
+    for k in (0, 1):    # every held id exists on its level and includes the anchor chain
+        ids = model.footprint(inserted, k)
+        assert all(model.intro_level[i] <= k for i in ids)
+        assert model.representative(inserted, k) in ids
+
+
+def test_lifting_grasped_corners_keeps_the_strain_limit():
+    # The fold demo's first second: two corner grasps (the finest points within 3 cm)
+    # lift a flat cloth 0.25 m. Holding only the anchor chain on the coarser levels let
+    # the spring from a held fine point to its inherited neighbour stretch 67 %; with the
+    # footprint held, the finest level stays near the 10 % limit (refinement levels get 4
+    # sweeps, so up to about 15 %, see README).
+    scene = make_scene(ground_z=0.0, friction=0.8)
+    model = ClothBuilder(resolution=(9, 9), level_count=4, scene=scene,
+                         placement=Placement((-0.5, -0.5, 0.003), (1, 0, 0), (0, 1, 0))
+                         ).finalize()
+    state, control = State.at_rest(model), Control(model)
+    solver = make_solver('hierarchical', model)
+    pts = state.points_by_id(model, 3)
+    for name, corner in (('l', (-0.5, -0.5, 0.003)), ('r', (0.5, -0.5, 0.003))):
+        control.grasp(name, np.flatnonzero(np.linalg.norm(pts - corner, axis=1) < 0.03), state)
+    worst = 0.0
+    for i in range(1, 61):
+        for name in ('l', 'r'):
+            control.move_grasp(name, np.eye(3), (0.0, 0.0, 0.25 * i / 60))
+        report = solver.step(state, control, 1 / 60)
+        assert report.ok, report.reason
+        worst = max(worst, report.max_strain)
+    assert worst < 0.2

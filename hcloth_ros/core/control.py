@@ -1,9 +1,11 @@
 """What the outside world sets: pinned points, grasps and kinematic targets.
 
 Everything is given in point ids of the finest level (see :mod:`hcloth_ros.core.model`).
-A hold is made consistent across levels here: on a level where a held id does not exist,
-its representative (the anchor chain of first parents, :meth:`ClothModel.representative`)
-is held instead, so a coarse level never drags a held fine point's neighbourhood away.
+A hold is made consistent across levels here, so a coarse level never drags a held fine
+point's neighbourhood away: on a level where a pinned id does not exist, its
+representative (the anchor chain of first parents, :meth:`ClothModel.representative`) is
+pinned; a grasp holds its footprint there (both end points of the edge the id was
+inserted on, recursively, :meth:`ClothModel.footprint`), rigid with the grasp frame.
 
 * A pinned point does not move at all, bit for bit, on every level where it (or its
   representative) is held.
@@ -137,7 +139,8 @@ class Control:
         p = _check_vector(translation, 'translation')
         grid_index, local = [], []
         for k in range(self.model.level_count):
-            reps = np.unique([self.model.representative(i, k) for i in arr.tolist()])
+            reps = np.unique(sorted(set().union(*(self.model.footprint(i, k)
+                                                  for i in arr.tolist()))))
             g = self.model.level(k).id_to_grid[reps]
             x = state.q[k].reshape(3, -1)[:, g]
             grid_index.append(np.ascontiguousarray(g))

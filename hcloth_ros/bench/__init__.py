@@ -1,0 +1,2 @@
+"""The evidence benchmark (``hcloth_bench`` / ``python -m hcloth_ros.bench``): speed
+against accuracy, stability maps, the paper's figures and the peer simulators."""

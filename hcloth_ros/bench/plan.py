@@ -1,0 +1,98 @@
+"""What a benchmark run covers: the methods, their settings and the three presets.
+
+``full`` is what the README's charts come from; ``quick`` finishes in a few minutes on 2
+cores; ``tiny`` is the seconds-long smoke run of the test suite.
+"""
+
+from dataclasses import dataclass
+
+
+@dataclass(frozen=True)
+class Method:
+    """One solver configuration: a line on the charts."""
+
+    label: str
+    solver: str
+    options: tuple = ()         # (name, value) pairs for make_solver
+    levels: int = 1
+    max_n: int = 10 ** 6        # skip larger meshes (the implicit solver's cost)
+    dts: tuple = None           # None: the plan's dts
+
+    @property
+    def kwargs(self):
+        return dict(self.options)
+
+
+@dataclass(frozen=True)
+class Plan:
+    name: str
+    sizes: tuple                # finest points a side
+    duration: float             # simulated seconds of each accuracy run
+    dts: tuple                  # time steps of the approximate and implicit methods
+    level_counts: tuple         # hierarchical variants (those that fit a size)
+    implicit_tolerances: tuple
+    implicit_max_n: int
+    scenarios: tuple = ('swing', 'free_fall', 'grasp')
+    stability_n: int = 17
+    stability_duration: float = 1.0
+    stiffnesses: tuple = (1e1, 1e2, 1e3, 1e4, 1e5)
+    stability_dts: tuple = tuple(1 / (30 * 2 ** i) for i in range(11))    # to 1/30720 s
+    paper_levels: int = 4       # Fig. 3/5/6 cloth: 9 x 9 level 0 and this many levels
+    paper_seconds: float = 2.0
+    fig4: bool = True           # time the paper's 8192-point cloth
+
+
+FULL = Plan('full', sizes=(17, 33, 65), duration=2.0,
+            dts=(1 / 30, 1 / 60, 1 / 120, 1 / 240, 1 / 480),
+            level_counts=(2, 3, 4), implicit_tolerances=(1e-2, 1e-4), implicit_max_n=33)
+QUICK = Plan('quick', sizes=(17,), duration=1.5, dts=(1 / 30, 1 / 60, 1 / 120, 1 / 240),
+             level_counts=(2, 3), implicit_tolerances=(1e-3,), implicit_max_n=17,
+             stiffnesses=(1e1, 1e3, 1e5), stability_n=9,
+             stability_dts=tuple(1 / (30 * 2 ** i) for i in range(0, 9, 2)),
+             paper_levels=3, paper_seconds=1.0)
+TINY = Plan('tiny', sizes=(9,), duration=0.4, dts=(1 / 30, 1 / 60), level_counts=(2,),
+            implicit_tolerances=(1e-2,), implicit_max_n=9, scenarios=('swing', 'free_fall'),
+            stability_n=5, stability_duration=0.2, stiffnesses=(1e2, 1e4),
+            stability_dts=(1 / 30, 1 / 480), paper_levels=2, paper_seconds=0.2, fig4=False)
+PLANS = {p.name: p for p in (FULL, QUICK, TINY)}
+
+
+def accuracy_methods(plan, n):
+    """Every method of the speed-against-accuracy sweep that fits a finest side of n."""
+    from hcloth_ros.bench.scenarios import level0_side
+    methods = [Method('explicit', 'explicit', (('strain_limit', None),))]
+    for ext in ('exact', 'literal'):
+        methods.append(Method(f'approx {ext}', 'approx', (('external', ext),)))
+    for levels in plan.level_counts:
+        try:
+            level0_side(n, levels)
+        except ValueError:
+            continue
+        for ext in ('exact', 'literal'):
+            methods.append(Method(f'hierarchical {ext} L{levels}', 'hierarchical',
+                                  (('external', ext),), levels))
+    for tol in plan.implicit_tolerances:
+        methods.append(Method(f'implicit tol {tol:g} m', 'implicit',
+                              (('tolerance', tol), ('strain_limit', None)),
+                              max_n=plan.implicit_max_n, dts=plan.dts[:3]))
+    return methods
+
+
+def stability_methods(plan):
+    """The solvers mapped over time step and stiffness (``n = plan.stability_n``)."""
+    levels = 3 if plan.stability_n >= 9 else 2
+    return [
+        Method('explicit', 'explicit', (('strain_limit', None),)),
+        Method('approx exact, no strain limit', 'approx', (('strain_limit', None),)),
+        Method('approx exact, 10 % strain limit', 'approx'),
+        Method(f'hierarchical exact L{levels}, no strain limit', 'hierarchical',
+               (('strain_limit', None),), levels),
+        Method(f'hierarchical exact L{levels}, 10 % strain limit (default)', 'hierarchical',
+               (), levels),
+        Method(f'hierarchical literal L{levels}, 10 % strain limit', 'hierarchical',
+               (('external', 'literal'),), levels),
+        # every other step down to 1/1920 s: Newton-CG at k = 1e5 costs ~1 min per run
+        Method('implicit tol 1e-3 m', 'implicit', (('tolerance', 1e-3), ('strain_limit', None)),
+               dts=tuple(dt for i, dt in enumerate(plan.stability_dts)
+                         if i % 2 == 0 and dt >= 1 / 1920 * 0.999)),
+    ]
