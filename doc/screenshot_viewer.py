@@ -65,7 +65,7 @@ def main(argv=None):
                                '--web-viewer-port', '9090', '--port', '9876', args.rrd],
                               stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
                               start_new_session=True)
-    with tempfile.TemporaryDirectory() as profile:
+    with tempfile.TemporaryDirectory(ignore_cleanup_errors=True) as profile:
         browser = subprocess.Popen(['chromium', *CHROMIUM_FLAGS, f'--user-data-dir={profile}',
                                     f'--window-size={args.size}', '--remote-debugging-port=9333',
                                     'about:blank'],
@@ -82,6 +82,7 @@ def main(argv=None):
             print(f'wrote {args.png}')
         finally:
             browser.kill()
+            browser.wait()      # before its profile folder is removed
             os.killpg(viewer.pid, signal.SIGTERM)
 
 

@@ -26,7 +26,6 @@ every grasp.
 import faulthandler
 import gc
 import json
-import os
 import signal
 import threading
 import time
@@ -436,12 +435,11 @@ def main(args=None):
         signal.signal(signum, _request_stop)
     # `kill -USR1 <pid>` prints every thread's Python stack: a hung node explains itself
     faulthandler.register(signal.SIGUSR1, all_threads=True)
-    # With the OpenMP threading layer, Ctrl-C right as the timer starts crashed the
-    # process on exit (SIGSEGV in 1 of 12 starts, with rclpy's signal handlers). The
-    # workqueue layer did not, but costs 2-4x the step at one thread (1.6-3.8 ms against
-    # 0.9 ms on config/fold.yaml). An explicit NUMBA_THREADING_LAYER still wins.
-    if 'NUMBA_THREADING_LAYER' not in os.environ:
-        numba.config.THREADING_LAYER = 'workqueue'
+    # numba picks its threading layer (OpenMP here). OpenMP once crashed on an early
+    # Ctrl-C (1 in 12 starts, under rclpy's signal handlers); with the stop flag above, 0
+    # crashes in about 220 interrupted starts, while the workqueue layer costs 2-4x the
+    # step at one thread (16k-point node benchmark: tick p99 16.0 ms against 7.7 ms).
+    # NUMBA_THREADING_LAYER in the environment chooses another.
     rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
     node = None
     try:
