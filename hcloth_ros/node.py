@@ -437,8 +437,9 @@ def main(args=None):
     faulthandler.register(signal.SIGUSR1, all_threads=True)
     # numba picks its threading layer (OpenMP here). OpenMP once crashed on an early
     # Ctrl-C (1 in 12 starts, under rclpy's signal handlers); with the stop flag above, 0
-    # crashes in about 220 interrupted starts, while the workqueue layer costs 2-4x the
-    # step at one thread (16k-point node benchmark: tick p99 16.0 ms against 7.7 ms).
+    # crashes in about 220 interrupted starts (doc/interrupt_stress.py), while the
+    # workqueue layer costs 2-4x the step at one thread (16k-point node benchmark: tick
+    # p99 16.0 ms against 7.7 ms).
     # NUMBA_THREADING_LAYER in the environment chooses another.
     rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
     node = None

@@ -10,8 +10,8 @@ from hcloth_ros.bench.scenarios import SAMPLE_EVERY, simulate
 
 def explicit_dts(n):
     """Symplectic Euler's ladder: from 1/30 s down to twice the reference step."""
-    dts, dt = [], SAMPLE_EVERY
-    while dt >= 2 * reference_dt(n) * 0.999:
+    dts, dt, smallest = [], SAMPLE_EVERY, 2 * reference_dt(n) * 0.999
+    while dt >= smallest:
         dts.append(dt)
         dt /= 2
     return tuple(dts)

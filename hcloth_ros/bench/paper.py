@@ -8,7 +8,7 @@ import numba
 import numpy as np
 
 from hcloth_ros.bench.reference import reference_dt
-from hcloth_ros.bench.scenarios import simulate
+from hcloth_ros.bench.scenarios import build_model, simulate
 from hcloth_ros.core import ClothBuilder, Control, Placement, State, make_solver
 from hcloth_ros.core.metrics import mean_curvature, wrinkliness
 
@@ -99,7 +99,7 @@ def fig6_runs(plan, progress):
         progress(f'paper fig. 6: contraction {label}')
         run = simulate('swing', 'hierarchical', n, levels, 1 / 60, plan.paper_seconds,
                        contraction=values)
-        model = ClothBuilder(resolution=(9, 9), level_count=levels).finalize()
+        model = build_model(n, levels, contraction=values)
         state = State.at_rest(model)
         state.q[-1][:] = run.points[-1].T.reshape(3, n, n)
         out[label] = dict(run=run, wrinkle=wrinkliness(model, state, levels - 1),

@@ -59,14 +59,12 @@ PLANS = {p.name: p for p in (FULL, QUICK, TINY)}
 
 def accuracy_methods(plan, n):
     """Every method of the speed-against-accuracy sweep that fits a finest side of n."""
-    from hcloth_ros.bench.scenarios import level0_side
+    from hcloth_ros.bench.scenarios import fits
     methods = [Method('explicit', 'explicit', (('strain_limit', None),))]
     for ext in ('exact', 'literal'):
         methods.append(Method(f'approx {ext}', 'approx', (('external', ext),)))
     for levels in plan.level_counts:
-        try:
-            level0_side(n, levels)
-        except ValueError:
+        if not fits(n, levels):
             continue
         for ext in ('exact', 'literal'):
             methods.append(Method(f'hierarchical {ext} L{levels}', 'hierarchical',

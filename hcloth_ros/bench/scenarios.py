@@ -13,7 +13,7 @@ hierarchical solver with 2, 3 or 4 levels and a single-level solver share the sa
 mesh and the same reference.
 """
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 import time
 
 import numpy as np
@@ -33,6 +33,15 @@ def level0_side(n, levels):
     if rem or n0 < 1:
         raise ValueError(f'a finest side of {n} points cannot be split into {levels} levels')
     return n0 + 1
+
+
+def fits(n, levels):
+    """Whether a finest side of ``n`` points splits into ``levels`` levels."""
+    try:
+        level0_side(n, levels)
+        return True
+    except ValueError:
+        return False
 
 
 def build_model(n, levels=1, k=1000.0, contraction=None):
@@ -110,7 +119,6 @@ class Run:
     max_strain: float = 0.0
     wall: float = 0.0               # s spent in stepping (and driving) only
     failed: str = ''                # why the run stopped early ('' if it did not)
-    extra: dict = field(default_factory=dict)
 
     @property
     def wall_per_sim_second(self):

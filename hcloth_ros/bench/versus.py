@@ -11,7 +11,7 @@ import numpy as np
 
 from hcloth_ros.bench import peers
 from hcloth_ros.bench.reference import reference
-from hcloth_ros.bench.scenarios import SAMPLE_EVERY, level0_side, simulate
+from hcloth_ros.bench.scenarios import SAMPLE_EVERY, fits, level0_side, simulate
 
 STRAIN_BOUND = 0.2
 LADDER = tuple(SAMPLE_EVERY / 2 ** i for i in range(8))     # 1/30 .. 1/3840 s
@@ -19,18 +19,11 @@ LADDER = tuple(SAMPLE_EVERY / 2 ** i for i in range(8))     # 1/30 .. 1/3840 s
 
 def _ours(n):
     # the default scene's 9 x 9 level 0 where the size allows it, else the most levels
-    fitting = [lv for lv in range(1, 6) if _fits(n, lv)]
+    fitting = [lv for lv in range(1, 6) if fits(n, lv)]
     levels = next((lv for lv in fitting if level0_side(n, lv) == 9), max(fitting))
     return [(f'hcloth hierarchical L{levels} (default)', 'hierarchical', levels, {}),
             ('hcloth explicit', 'explicit', 1, dict(strain_limit=None))]
 
-
-def _fits(n, levels):
-    try:
-        level0_side(n, levels)
-        return True
-    except ValueError:
-        return False
 
 
 def _largest_plausible_ours(solver, n, levels, options, duration, progress, label):
