@@ -27,11 +27,11 @@ setup(
     entry_points={
         'console_scripts': [
             'sim_node = hcloth_ros.node:main',
-            'hcloth_demo = hcloth_ros.demo:main',
-            'hcloth_demo_run = hcloth_ros.demo_run:main',
-            'hcloth_fold_client = hcloth_ros.demo_client:main',
-            'hcloth_node_bench = hcloth_ros.bench_node:main',
-            'hcloth_engine_bench = hcloth_ros.bench_engine:main',
+            'hcloth_demo = hcloth_ros.demo.headless:main',
+            'hcloth_demo_run = hcloth_ros.demo.run:main',
+            'hcloth_fold_client = hcloth_ros.demo.fold_client:main',
+            'hcloth_node_bench = hcloth_ros.bench.node:main',
+            'hcloth_engine_bench = hcloth_ros.bench.engine:main',
             'hcloth_bench = hcloth_ros.bench.__main__:main',
         ],
     },

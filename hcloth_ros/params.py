@@ -5,6 +5,7 @@ A parameter file has the ROS 2 layout (``<node name or /**>: ros__parameters: ..
 nested keys become dotted names (``cloth: {width: 1.0}`` is ``cloth.width``).
 """
 
+import os
 from dataclasses import dataclass
 
 import numpy as np
@@ -60,6 +61,19 @@ PARAMS = [
           'for the numbering); [-1] = none', -1, 2 ** 31 - 1, False),
 ]
 PARAM_BY_NAME = {p.name: p for p in PARAMS}
+
+
+def config_path(name):
+    """A file of this package's ``config/``: installed share directory, else the source."""
+    try:
+        from ament_index_python.packages import get_package_share_directory
+        path = os.path.join(get_package_share_directory('hcloth_ros'), 'config', name)
+        if os.path.exists(path):
+            return path
+    except (ImportError, LookupError, ValueError, OSError):
+        pass
+    return os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))),
+                        'config', name)
 
 
 def flatten(tree, prefix=''):

@@ -5,7 +5,8 @@ import os
 import matplotlib.image as mpimg
 import numpy as np
 
-from hcloth_ros import demo, params
+from hcloth_ros import params
+from hcloth_ros.demo import headless as demo
 
 
 def test_demo_writes_snapshots_and_curves(tmp_path, capsys):
@@ -22,7 +23,7 @@ def test_demo_writes_snapshots_and_curves(tmp_path, capsys):
 def test_demo_simulation_follows_the_scene():
     # 0.5 s of the hanging scene: the free corners fall, the pinned ones stay; the
     # centre of mass must have dropped by more than 5 cm (free fall would be 1.2 m).
-    values = params.resolve(params.load_file(demo.config_path('hanging.yaml')))
+    values = params.resolve(params.load_file(params.config_path('hanging.yaml')))
     model, shots, curves = demo.simulate(values, 0.5, [0.0, 0.5], progress=False)
     (t0, s0), (t1, s1) = shots
     assert (t0, t1) == (0.0, 0.5)
@@ -40,7 +41,7 @@ def test_fold_demo_folds_the_cloth_and_leaves_a_recording(tmp_path, monkeypatch)
 
     from rerun.chunk import RrdReader
 
-    from hcloth_ros import demo_run
+    from hcloth_ros.demo import run as demo_run
     monkeypatch.setenv('ROS_DOMAIN_ID', str(random.randint(100, 200)))
     monkeypatch.setenv('AMENT_PREFIX_PATH', sys.prefix)
     out = str(tmp_path / 'fold.rrd')

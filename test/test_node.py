@@ -253,12 +253,12 @@ def test_governor_drops_levels_when_ticks_overrun():
         executor.add_node(sim)
         executor.add_node(probe)
         end = time.monotonic() + 5
-        while sim.level_cap == 3 and time.monotonic() < end:
+        while sim.governor.cap == 3 and time.monotonic() < end:
             executor.spin_once(timeout_sec=0.01)
-        assert sim.level_cap < 3
-        while sim.solver.finest_level > sim.level_cap and time.monotonic() < end:
+        assert sim.governor.cap < 3
+        while sim.solver.finest_level > sim.governor.cap and time.monotonic() < end:
             executor.spin_once(timeout_sec=0.01)     # applied at the next tick
-        assert sim.solver.finest_level <= sim.level_cap
+        assert sim.solver.finest_level <= sim.governor.cap
         executor.shutdown()
         sim.destroy_node()
         probe.destroy_node()

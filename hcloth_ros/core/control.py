@@ -22,9 +22,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-FREE = 0
-PINNED = 1
-DRIVEN = 2
+from hcloth_ros.core.kernels.layout import DRIVEN, FREE, PINNED  # noqa: F401 (re-exported)
 
 
 @dataclass

@@ -21,14 +21,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-# The 12-spring stencil of every grid point as (row offset, column offset), in pairs of
-# opposite directions: structural along u, structural along v, the two shear diagonals,
-# bending along u, bending along v. The kernels iterate over this table.
-STENCIL_DR = np.array([0, 0, 1, -1, 1, -1, 1, -1, 0, 0, 2, -2], dtype=np.int64)
-STENCIL_DC = np.array([1, -1, 0, 0, 1, -1, -1, 1, 2, -2, 0, 0], dtype=np.int64)
+# The 12-spring stencil of every grid point (row and column offsets, in pairs of opposite
+# directions) is the kernels' (hcloth_ros.core.kernels.layout); its spring kinds:
+from hcloth_ros.core.kernels.layout import STENCIL_DC, STENCIL_DR, STENCIL_SIZE  # noqa: F401
 STENCIL_KIND = ('struct_u', 'struct_u', 'struct_v', 'struct_v', 'shear', 'shear',
                 'shear', 'shear', 'bend_u', 'bend_u', 'bend_v', 'bend_v')
-STENCIL_SIZE = 12
 
 
 @dataclass(frozen=True)

@@ -27,6 +27,7 @@ state keeps its last good value and the report says why.
 import time
 from dataclasses import dataclass, field
 
+import numba
 import numpy as np
 
 from hcloth_ros.core import kernels
@@ -73,12 +74,16 @@ class Solver:
             (relative to the limit).
         blowup_strain: a step that leaves a spring stretched beyond this (relative) or
             any value non-finite is refused.
+        builds: ``'serial'`` or ``'parallel'`` kernel builds on every level (or a kernel
+            set with their names), or None: the parallel builds on levels large enough to
+            split when numba runs several threads (see :mod:`hcloth_ros.core.kernels`).
     """
 
     name = ''
 
     def __init__(self, model, external='exact', strain_limit=0.1, strain_iterations=100,
-                 strain_refine_iterations=4, strain_tolerance=0.005, blowup_strain=10.0):
+                 strain_refine_iterations=4, strain_tolerance=0.005, blowup_strain=10.0,
+                 builds=None):
         if external not in EXTERNAL_MODES:
             raise ValueError(f'external must be one of {EXTERNAL_MODES}, got {external!r}')
         if strain_limit is not None and not (0.0 < strain_limit < 10.0):
@@ -91,6 +96,10 @@ class Solver:
             raise ValueError(f'strain_tolerance must be in (0, 1), got {strain_tolerance}')
         if not (blowup_strain > 0):
             raise ValueError(f'blowup_strain must be positive, got {blowup_strain}')
+        if isinstance(builds, str) and builds not in ('serial', 'parallel'):
+            raise ValueError(f"builds must be 'serial', 'parallel' or None, got {builds!r}")
+        self._builds = {'serial': kernels.SERIAL, 'parallel': kernels.PARALLEL}.get(
+            builds, builds) if isinstance(builds, str) else builds
         self.model = model
         self.literal = external == 'literal'
         self.external = external
@@ -117,7 +126,19 @@ class Solver:
         """Write level k's new state into ``self._q/_qd/_dv[k]``."""
         raise NotImplementedError
 
+    def set_finest_level(self, k, state, control):
+        """Simulate levels up to k from the next step (no-op for one-level solvers)."""
+        return self.levels()[-1]
+
     # --- shared --------------------------------------------------------------------------
+    def kernels(self, k):
+        """The kernel builds for level k: parallel only with several numba threads and a
+        level large enough to split (:func:`kernels.builds`)."""
+        if self._builds is not None:
+            return self._builds
+        lv = self.model.level(k)
+        return kernels.builds(lv.rows, lv.cols, self._threads)
+
     def dinv(self, k, h):
         """``1 / (m_i + h^2 K_i)`` of level k, cached per step size."""
         key = (k, h)
@@ -127,14 +148,14 @@ class Solver:
         return self._dinv[key]
 
     def _prescribe(self, k, state, holds, h):
-        kernels.prescribe(state.q[k], state.qd[k], holds.kind, holds.drive_index,
+        self.kernels(k).prescribe(state.q[k], state.qd[k], holds.kind, holds.drive_index,
                           holds.drive_target, h, self._presc[k])
 
     def _post(self, k, state, holds, h, inherited_fixed):
         """Strain limiting, then contact: no point ends the step inside an obstacle."""
         lv = self.model.level(k)
         if self.strain_limit is not None:
-            sweeps = kernels.strain_limit(self._q[k], self._qd[k], self._dv[k], lv.rest,
+            sweeps = self.kernels(k).strain_limit(self._q[k], self._qd[k], self._dv[k], lv.rest,
                                           holds.kind, inherited_fixed, self.strain_limit,
                                           self.strain_refine_iterations if inherited_fixed
                                           else self.strain_iterations,
@@ -143,7 +164,7 @@ class Solver:
             self._extra[f'strain_sweeps_{k}'] = sweeps
         scene = self.model.scene
         if scene is not None and not scene.empty:
-            kernels.contact(self._q[k], self._qd[k], self._dv[k], state.q[k], holds.kind,
+            self.kernels(k).contact(self._q[k], self._qd[k], self._dv[k], state.q[k], holds.kind,
                             inherited_fixed, scene.planes, scene.boxes, scene.spheres,
                             scene.friction, scene.margin)
 
@@ -153,6 +174,7 @@ class Solver:
         if not (np.isfinite(dt) and 0.0 < dt <= 1.0):
             return StepReport(False, f'dt must be in (0, 1] s, got {dt}')
         h = float(dt)
+        self._threads = numba.get_num_threads()
         levels = self.levels()
         self._extra = {}
         for k in levels:
@@ -161,6 +183,8 @@ class Solver:
             self._integrate(k, state, holds, h)
         report = self._check(levels)
         if report.ok:
+            # the new state goes in by swapping arrays (no copy): State.q[k] and
+            # State.qd[k] are other array objects after every step (see State)
             for k in levels:
                 state.q[k], self._q[k] = self._q[k], state.q[k]
                 state.qd[k], self._qd[k] = self._qd[k], state.qd[k]
@@ -173,7 +197,7 @@ class Solver:
         worst = 0.0
         mean = 0.0
         for k in levels:
-            mx, mean, finite = kernels.strain_stats(self._q[k], self._qd[k],
+            mx, mean, finite = self.kernels(k).strain_stats(self._q[k], self._qd[k],
                                                     self.model.level(k).rest)
             if not finite:
                 return StepReport(False, f'non-finite state on level {k}: step refused, '
@@ -203,7 +227,7 @@ class ExplicitSolver(_SingleLevel):
 
     def _integrate(self, k, state, holds, h):
         lv = self.model.level(k)
-        kernels.explicit_step(state.q[k], state.qd[k], lv.mass, lv.rest, lv.stiffness,
+        self.kernels(k).explicit_step(state.q[k], state.qd[k], lv.mass, lv.rest, lv.stiffness,
                               lv.contraction, holds.kind, self._presc[k], h,
                               self.model.gravity, self._q[k], self._qd[k], self._dv[k])
         self._post(k, state, holds, h, False)
@@ -222,10 +246,10 @@ class ApproxSolver(_SingleLevel):
 def _eq6(solver, k, state, holds, h):
     lv = solver.model.level(k)
     ft, a = solver._scratch[k], solver._a[k]
-    kernels.eq6_first_sweep(state.q[k], state.qd[k], lv.mass, lv.rest, lv.stiffness,
+    solver.kernels(k).eq6_first_sweep(state.q[k], state.qd[k], lv.mass, lv.rest, lv.stiffness,
                             lv.contraction, solver.dinv(k, h), holds.kind, solver._presc[k],
                             h, solver.model.gravity, solver.literal, ft, a)
-    kernels.eq6_second_sweep(state.q[k], state.qd[k], lv.stiffness, solver.dinv(k, h),
+    solver.kernels(k).eq6_second_sweep(state.q[k], state.qd[k], lv.stiffness, solver.dinv(k, h),
                              holds.kind, solver._presc[k], ft, a, h, solver.model.gravity,
                              solver.literal, solver._q[k], solver._qd[k], solver._dv[k])
 
@@ -233,8 +257,8 @@ def _eq6(solver, k, state, holds, h):
 class HierarchicalSolver(Solver):
     """The paper's Table 1 over levels ``0 .. finest_level``.
 
-    ``finest_level`` may change between steps; a level simulated again after a pause
-    must be restarted from the coarser state first (:func:`prolong_state`).
+    ``finest_level`` may change between steps: :meth:`set_finest_level` restarts a level
+    that comes back from the coarser state, so nothing jumps.
     """
 
     name = 'hierarchical'
@@ -256,14 +280,28 @@ class HierarchicalSolver(Solver):
     def levels(self):
         return list(range(self._finest + 1))
 
+    def set_finest_level(self, k, state, control):
+        """Simulate levels ``0 .. k`` from the next step; returns k.
+
+        A level that comes back (not simulated while coarser ones moved on) restarts from
+        the coarser level's state, positions and velocities prolonged, and the control
+        re-takes its holds there (grasped points keep their place in the grasp frame).
+        """
+        self.model.level(int(k))
+        for level in range(self._finest + 1, int(k) + 1):
+            prolong_state(state, level)
+            control.recapture(state, level)
+        self.finest_level = k
+        return self._finest
+
     def _integrate(self, k, state, holds, h):
         if k == 0:
             _eq6(self, 0, state, holds, h)
             self._post(0, state, holds, h, False)
             return
         lv = self.model.level(k)
-        kernels.prolong(self._dv[k - 1], self._dv_app[k])
-        kernels.eq7_level(state.q[k], state.qd[k], lv.mass, lv.rest, lv.stiffness,
+        self.kernels(k).prolong(self._dv[k - 1], self._dv_app[k])
+        self.kernels(k).eq7_level(state.q[k], state.qd[k], lv.mass, lv.rest, lv.stiffness,
                           lv.contraction, self.dinv(k, h), holds.kind, self._presc[k], h,
                           self.model.gravity, self.literal, self._q[k - 1], self._qd[k - 1],
                           self._dv[k - 1], self._dv_app[k], self._q[k], self._qd[k],
@@ -314,16 +352,16 @@ class ImplicitSolver(_SingleLevel):
         for newton in range(1, self.max_newton + 1):
             np.multiply(v_plus, h, out=x_eval)
             x_eval += q
-            kernels.spring_forces(x_eval, lv.rest, lv.stiffness, lv.contraction, f)
+            self.kernels(k).spring_forces(x_eval, lv.rest, lv.stiffness, lv.contraction, f)
             # rhs = -R on free points, zero on held ones
             np.subtract(v_plus, qd, out=rhs)
             rhs *= -lv.mass
             rhs += h * f
             rhs += (h * lv.mass) * g
             rhs *= free
-            kernels.system_diagonal(x_eval, lv.rest, lv.stiffness, lv.contraction, lv.mass,
+            self.kernels(k).system_diagonal(x_eval, lv.rest, lv.stiffness, lv.contraction, lv.mass,
                                     free, h, diag)
-            iters, _ = kernels.conjugate_gradient(x_eval, lv.rest, lv.stiffness,
+            iters, _ = self.kernels(k).conjugate_gradient(x_eval, lv.rest, lv.stiffness,
                                                   lv.contraction, lv.mass, free, h, rhs,
                                                   delta, diag, self.cg_rtol,
                                                   self.cg_max_iter, r, z, p, ap)
@@ -380,33 +418,5 @@ def make_solver(name, model, **options):
 
 def prolong_state(state, k):
     """Restart level k from level k-1's state (positions and velocities, no jump)."""
-    kernels.prolong(state.q[k - 1], state.q[k])
-    kernels.prolong(state.qd[k - 1], state.qd[k])
-
-
-def warm_up():
-    """Compile every kernel on a tiny cloth; returns the seconds it took.
-
-    With the on-disk cache this mostly loads machine code; the first run on a machine
-    compiles (tens of seconds).
-    """
-    from hcloth_ros.core.control import Control
-    from hcloth_ros.core.model import ClothBuilder
-    from hcloth_ros.core.scene import make_scene
-    from hcloth_ros.core.state import State
-    start = time.perf_counter()
-    scene = make_scene(ground_z=0.0, boxes=[(0, 0, -1, 1, 1, 1)], spheres=[(0, 0, -1, 0.5)])
-    model = ClothBuilder(resolution=(3, 3), level_count=2, scene=scene).finalize()
-    for name in SOLVERS:
-        for external in EXTERNAL_MODES:
-            state = State.at_rest(model)
-            control = Control(model)
-            control.pin([0])
-            control.set_target(2, (1.0, 0.0, 1.0), state)
-            solver = make_solver(name, model, external=external)
-            solver.step(state, control, 1e-3)
-            lv = model.level(0)
-            kernels.energy(state.q[0], state.qd[0], lv.mass, lv.rest, lv.stiffness,
-                           lv.contraction, model.gravity)
-    prolong_state(State.at_rest(model), 1)
-    return time.perf_counter() - start
+    kernels.SERIAL.prolong(state.q[k - 1], state.q[k])
+    kernels.SERIAL.prolong(state.qd[k - 1], state.qd[k])

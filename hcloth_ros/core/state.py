@@ -9,6 +9,16 @@ class State:
     Each is a C-contiguous float64 array of shape ``(3, rows, cols)`` (structure of
     arrays: x, y and z planes), in metres and metres per second, grid order. ``time`` is
     the simulated time in seconds.
+
+    What a step does to the arrays: a solver writes the new state of every simulated level
+    into buffers of its own and, if the step is accepted, swaps them in: afterwards
+    ``q[k]`` and ``qd[k]`` are other array objects than before (the old ones become the
+    solver's buffers and are overwritten by the next step), and ``time`` grows by ``dt``.
+    Levels not simulated keep their arrays. So read positions through the state after
+    every step (``state.q[k]``, :meth:`points`) and copy what you keep (:meth:`copy`);
+    a reference to an array taken before a step is stale after it. A refused step leaves
+    the arrays and the time as they were. :meth:`assign` copies values into the current
+    arrays.
     """
 
     def __init__(self, q, qd, time=0.0):

@@ -2,7 +2,7 @@
 exits, deaths by signal and hangs (the figures on signal handling in the notes come from
 this; about 2.5 s a start).
 
-    AMENT_PREFIX_PATH=$PWD/.venv .venv/bin/python doc/interrupt_stress.py --starts 50
+    AMENT_PREFIX_PATH=$PWD/.venv .venv/bin/python tools/interrupt_stress.py --starts 50
 
 A start that does not exit within 15 s of its signal is a hang: it gets SIGUSR1 (the node
 prints every thread's stack) and is killed, and its stderr is printed.

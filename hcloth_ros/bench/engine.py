@@ -1,6 +1,6 @@
 """Engine benchmark: milliseconds per step of every solver at three cloth sizes.
 
-Run ``hcloth_engine_bench`` (or ``python -m hcloth_ros.bench_engine``). Scene: a 1 m x 1 m
+Run ``hcloth_engine_bench`` (or ``python -m hcloth_ros.bench.engine``). Scene: a 1 m x 1 m
 cloth pinned at its two level-0 corners ``(0, 0)`` and ``(0, cols-1)``, ``dt = 1/60``,
 default solver options (strain limiting on, exact gravity), no obstacles.
 
@@ -28,9 +28,10 @@ A kernel-by-kernel breakdown of the hierarchical step is taken on the largest si
 timing every kernel call the solver makes.
 
 Cold start: a fresh interpreter with an empty ``NUMBA_CACHE_DIR`` (a temporary directory)
-imports the engine and runs :func:`hcloth_ros.core.solvers.warm_up` (compiles every
-kernel); a second fresh interpreter with the now-filled cache does the same (loads the
-machine code).
+imports the engine and runs :func:`hcloth_ros.core.warm_up` for the node's default
+configuration and for every kernel, each in one process and over the default number of
+processes (:data:`COLD_CONFIGS`); a second fresh interpreter with the now-filled cache
+does the same (loads the machine code).
 
 Timings on a shared machine are only as good as its idle cores: the load average is
 printed before and after. Numba's thread count and threading layer go with every figure.
@@ -121,8 +122,9 @@ def run_config(size, solver_name, steps, warmup, budget, options=None, label=Non
 def breakdown(size, steps, warmup):
     """Time every kernel call of the hierarchical step (per kernel and level).
 
-    The solver's calls go through ``hcloth_ros.core.kernels`` attributes, which are
-    wrapped here with a timer for the duration of the measurement; the level of a call
+    The solver's calls go through the kernel sets ``kernels.SERIAL`` and
+    ``kernels.PARALLEL``, whose attributes are wrapped here with a timer for the
+    duration of the measurement; the level of a call
     is told from the shape of its array arguments. Each figure is the median over steps
     of the time per step (all calls of that kernel on that level within the step),
     including numba's dispatch overhead. ``python_overhead`` is the step time not spent
@@ -136,7 +138,8 @@ def breakdown(size, steps, warmup):
     level_of = {(lv.rows, lv.cols): lv.index for lv in model.levels}
     names = ['prescribe', 'eq6_first_sweep', 'eq6_second_sweep', 'prolong', 'eq7_level',
              'strain_limit', 'contact', 'strain_stats']
-    originals = {n: getattr(kernels, n) for n in names}
+    kits = (kernels.SERIAL, kernels.PARALLEL)
+    originals = {(kit, n): getattr(kit, n) for kit in kits for n in names}
     current = defaultdict(float)
     sweep_now = {}
 
@@ -159,7 +162,8 @@ def breakdown(size, steps, warmup):
     totals = []
     try:
         for n in names:
-            setattr(kernels, n, wrap(n, originals[n]))
+            for kit in kits:
+                setattr(kit, n, wrap(n, originals[kit, n]))
         for _ in range(steps):
             current.clear()
             sweep_now.clear()
@@ -174,7 +178,8 @@ def breakdown(size, steps, warmup):
             per_step[('python_overhead', -1)].append(totals[-1] - kernel_sum)
     finally:
         for n in names:
-            setattr(kernels, n, originals[n])
+            for kit in kits:
+                setattr(kit, n, originals[kit, n])
     rows = []
     for (name, k), values in sorted(per_step.items(), key=lambda kv: (kv[0][1], kv[0][0])):
         entry = dict(kernel=name, level=k, median_ms=float(np.median(values) * 1e3),
@@ -190,39 +195,56 @@ def breakdown(size, steps, warmup):
 _COLD_CHILD = r'''
 import json, sys, time
 t0 = time.perf_counter()
+c0 = time.process_time()
 import numba
-from hcloth_ros.core import solvers
+from hcloth_ros.core import warm_up
 t1 = time.perf_counter()
-warm = solvers.warm_up()
+warm = warm_up(**json.loads(sys.argv[1]))
 print(json.dumps(dict(import_s=t1 - t0, warm_up_s=warm, total_s=time.perf_counter() - t0,
+                      process_cpu_s=time.process_time() - c0,
                       threading_layer=numba.threading_layer(),
                       threads=numba.get_num_threads())))
 '''
 
+# What a cold start compiles: the node's default (hierarchical, one thread, no
+# recording) and everything (every solver, serial and parallel builds, the energy), each
+# in one process and spread over the default number of processes.
+COLD_CONFIGS = {
+    'node default, 1 process': dict(solvers=['hierarchical'], parallel=False, energy=False,
+                                    processes=1),
+    'node default': dict(solvers=['hierarchical'], parallel=False, energy=False),
+    'every kernel, 1 process': dict(parallel=True, processes=1),
+    'every kernel': dict(parallel=True),
+}
+
 
 def cold_start():
-    """JIT cost: warm_up() in a fresh interpreter with an empty, then a filled cache."""
-    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    """JIT cost: warm_up() in a fresh interpreter with an empty, then a filled cache, for
+    each of :data:`COLD_CONFIGS`."""
+    root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
     out = {}
-    with tempfile.TemporaryDirectory(prefix='hcloth_numba_cache_') as cache:
-        env = dict(os.environ, NUMBA_CACHE_DIR=cache,
-                   PYTHONPATH=os.pathsep.join([root] + [p for p in
-                                               os.environ.get('PYTHONPATH', '').split(
-                                                   os.pathsep) if p]))
-        for label in ('cold', 'warm_cache'):
-            t0 = time.perf_counter()
-            proc = subprocess.run([sys.executable, '-c', _COLD_CHILD], env=env,
-                                  capture_output=True, text=True, timeout=900)
-            wall = time.perf_counter() - t0
-            if proc.returncode != 0:
-                out[label] = dict(error=proc.stderr.strip().splitlines()[-1:])
-            else:
-                out[label] = json.loads(proc.stdout.strip().splitlines()[-1])
-                out[label]['process_wall_s'] = wall
-            print(f'  {label:10s} ' + (
-                f"import {out[label]['import_s']:.2f} s, warm_up {out[label]['warm_up_s']:.2f} s,"
-                f" process {wall:.2f} s" if 'error' not in out[label]
-                else f"FAILED: {out[label]['error']}"), flush=True)
+    for name, config in COLD_CONFIGS.items():
+        out[name] = {}
+        with tempfile.TemporaryDirectory(prefix='hcloth_numba_cache_') as cache:
+            env = dict(os.environ, NUMBA_CACHE_DIR=cache,
+                       PYTHONPATH=os.pathsep.join([root] + [p for p in os.environ.get(
+                           'PYTHONPATH', '').split(os.pathsep) if p]))
+            for label in ('cold', 'warm_cache'):
+                t0 = time.perf_counter()
+                proc = subprocess.run([sys.executable, '-c', _COLD_CHILD, json.dumps(config)],
+                                      env=env, capture_output=True, text=True, timeout=900)
+                wall = time.perf_counter() - t0
+                if proc.returncode != 0:
+                    result = dict(error=proc.stderr.strip().splitlines()[-1:])
+                else:
+                    result = json.loads(proc.stdout.strip().splitlines()[-1])
+                    result['process_wall_s'] = wall
+                out[name][label] = result
+                print(f'  {name:24s} {label:10s} ' + (
+                    f"import {result['import_s']:.2f} s, warm_up {result['warm_up_s']:.2f} s "
+                    f"(this process's cpu {result['process_cpu_s']:.1f} s), process "
+                    f"{wall:.2f} s" if 'error' not in result
+                    else f"FAILED: {result['error']}"), flush=True)
     return out
 
 

@@ -3,7 +3,7 @@ doc/rerun_viewer.png; about 2 minutes on 2 cores, the viewer renders in software
 
     .venv/bin/pip install websocket-client     # not a project dependency
     apt-get install chromium                   # Debian's
-    .venv/bin/python doc/screenshot_viewer.py out/fold.rrd doc/rerun_viewer.png
+    .venv/bin/python tools/screenshot_viewer.py out/fold.rrd doc/rerun_viewer.png
 
 Serves the file with ``rerun --web-viewer``, opens it in headless Chromium through the
 DevTools protocol and saves the page once the viewer has had ``--wait`` seconds to load

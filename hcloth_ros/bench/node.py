@@ -1,6 +1,6 @@
 """Node benchmark: sim_node and a subscriber in separate processes, per-tick breakdown.
 
-    python -m hcloth_ros.bench_node [--sizes 16k,65k] [--seconds 10] [--rate 60]
+    python -m hcloth_ros.bench.node [--sizes 16k,65k] [--seconds 10] [--rate 60]
 
 For each size the node runs the default hanging scene (level 0 9 x 9; 5 levels = 129 x 129
 = 16,641 points, 6 levels = 257 x 257 = 66,049) at ``--rate`` Hz with the Fast DDS
@@ -39,7 +39,7 @@ print(f'received {len(got)} {(len(got) - 1) / span if span else 0.0:.2f}')
 
 
 def run(levels, seconds, rate, record):
-    from hcloth_ros.demo import config_path
+    from hcloth_ros.params import config_path
     profile = config_path('fastdds_large_clouds.xml')
     env = dict(os.environ, ROS_DOMAIN_ID=str(random.randint(100, 200)),
                FASTDDS_DEFAULT_PROFILES_FILE=profile, PYTHONUNBUFFERED='1')

@@ -18,19 +18,6 @@ from hcloth_ros.core import warm_up
 from hcloth_ros.core.metrics import centre_of_mass
 
 
-def config_path(name):
-    """A file of this package's ``config/``: installed share directory, else the source."""
-    try:
-        from ament_index_python.packages import get_package_share_directory
-        path = os.path.join(get_package_share_directory('hcloth_ros'), 'config', name)
-        if os.path.exists(path):
-            return path
-    except (ImportError, LookupError, ValueError, OSError):
-        pass
-    return os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))),
-                        'config', name)
-
-
 def simulate(values, seconds, snapshot_times, progress=True):
     """Run the scene; returns snapshots, per-step curves and the model."""
     model, solver, state, control = params.build_all(values)
@@ -108,7 +95,7 @@ def plot_curves(curves, path, title):
 
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
-    parser.add_argument('--scene', default=config_path('hanging.yaml'),
+    parser.add_argument('--scene', default=params.config_path('hanging.yaml'),
                         help='ROS 2 parameter file of the scene')
     parser.add_argument('--seconds', type=float, default=3.0, help='simulated time (s)')
     parser.add_argument('--out', default='out/demo', help='output folder')

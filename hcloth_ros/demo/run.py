@@ -15,7 +15,7 @@ import subprocess
 import sys
 import time
 
-from hcloth_ros.demo import config_path
+from hcloth_ros.params import config_path
 
 
 def sim_node_path():
@@ -36,7 +36,7 @@ def main(argv=None):
     print('[demo] starting', ' '.join(node_cmd), flush=True)
     node = subprocess.Popen(node_cmd)
     try:
-        client = subprocess.run([sys.executable, '-m', 'hcloth_ros.demo_client'],
+        client = subprocess.run([sys.executable, '-m', 'hcloth_ros.demo.fold_client'],
                                 timeout=120)
         time.sleep(1.0)     # let the cloth settle on camera
     finally:

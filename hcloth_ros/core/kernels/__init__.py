@@ -1,0 +1,89 @@
+"""Every numba kernel of the engine, by the physics it computes.
+
+Map: what the paper (or the method) writes, the kernels that compute it, their plain
+reference forms (numpy, written from the formula) and the tests that hold them together,
+in the order of a step:
+
+held points' velocity change
+    ``holds.prescribe``; reference inline in ``test_kernel_equivalence::test_prescribe``
+spring force and eq. 4's filtered force ``f~ = f + h J v``
+    ``springs.force_row``; ``ref_force``; every sweep test of ``test_kernel_equivalence``
+eq. 6: two Jacobi sweeps of linearised backward Euler
+    ``eq6.eq6_first_sweep``, ``eq6.eq6_second_sweep``; ``ref_eq6`` and the dense
+    matrices ``DenseLevel``; ``test_kernel_equivalence::test_eq6_sweeps``,
+    ``test_eq6_eq7::test_eq6_is_two_jacobi_sweeps``
+Table 1, prolongation of the coarse velocity change
+    ``eq7.prolong``; ``ref_prolong``, the parent table; ``test_hierarchy::test_prolong_*``,
+    ``test_kernel_equivalence::test_eq7_level_and_prolong``
+Table 1, constraint C and eq. 7 on inserted points
+    ``eq7.eq7_level``; ``ref_eq7``, ``DenseLevel``;
+    ``test_kernel_equivalence::test_eq7_level_and_prolong``,
+    ``test_eq6_eq7::test_eq7_on_inserted_points``
+symplectic Euler
+    ``explicit.explicit_step``; ``ref_explicit``; ``test_kernel_equivalence::test_explicit_step``
+backward Euler's system ``(M - h^2 J) dv = b`` and its CG solve
+    ``implicit.system_apply``, ``implicit.system_diagonal``,
+    ``implicit.conjugate_gradient``, ``implicit.spring_forces``; ``ref_system_apply``;
+    ``test_kernel_equivalence::test_system_apply_and_cg``,
+    ``test_implicit::test_converged_step_satisfies_backward_euler``
+strain limiting (Provot 1995)
+    ``strain.strain_limit``; ``ref_strain_limit``; ``test_kernel_equivalence::test_strain_*``
+contact with static obstacles
+    ``contact.contact``; closed-form geometry; ``test_physics::test_cloth_dropped_on_*``
+strain and finiteness (the blow-up check), energy
+    ``stats.strain_stats``, ``stats.energy``; inline; ``test_kernel_equivalence::
+    test_strain_stats``, the energy checks of ``test_physics`` and ``test_implicit``
+
+The references live in ``test/test_kernel_equivalence.py`` (shifted numpy copies of the
+grid) and ``test/test_eq6_eq7.py`` (dense 3n x 3n matrices of the paper's equations).
+
+Shared pieces: :mod:`.layout` (the stencil, hold kinds, row chunks, the row update
+``v += dv, x += h v``), :mod:`.springs` (a spring's vector and Hooke coefficient, the
+force and the stencil sum along a row), :mod:`.jit` (flags and the source-keyed cache).
+
+Threads: each per-step kernel runs one ``prange`` over row chunks (one chunk, so one
+thread, on levels below ``layout.PAR_MIN_POINTS`` points). Strain limiting runs many
+sweeps per call and starts a parallel region per sweep only on levels of several chunks.
+"""
+
+from types import SimpleNamespace
+
+from hcloth_ros.core.kernels.jit import keyed_cache
+
+with keyed_cache():
+    from hcloth_ros.core.kernels.contact import contact
+    from hcloth_ros.core.kernels.eq6 import eq6_first_sweep, eq6_second_sweep
+    from hcloth_ros.core.kernels.eq7 import eq7_level, eq7_level_parallel, prolong
+    from hcloth_ros.core.kernels.explicit import explicit_step
+    from hcloth_ros.core.kernels.holds import prescribe
+    from hcloth_ros.core.kernels.implicit import (conjugate_gradient,
+                                                  conjugate_gradient_parallel,
+                                                  spring_forces, system_apply,
+                                                  system_apply_parallel, system_diagonal)
+    from hcloth_ros.core.kernels.layout import (chunk_count, DRIVEN, FREE, PAR_MIN_POINTS,
+                                                PINNED, STENCIL_DC, STENCIL_DR,
+                                                STENCIL_SIZE)
+    from hcloth_ros.core.kernels.stats import energy, strain_stats, strain_stats_parallel
+    from hcloth_ros.core.kernels.strain import (excess_threshold, strain_limit,
+                                                strain_limit_parallel)
+
+KERNELS = ('contact', 'conjugate_gradient', 'energy', 'eq6_first_sweep', 'eq6_second_sweep',
+           'eq7_level', 'excess_threshold', 'explicit_step', 'prescribe', 'prolong',
+           'spring_forces', 'strain_limit', 'strain_stats', 'system_apply',
+           'system_diagonal')
+# Every kernel by name: SERIAL holds the serial builds, PARALLEL the parallel builds of
+# those that have one (jit.serial_and_parallel) and the serial build of the others.
+SERIAL = SimpleNamespace(**{name: globals()[name] for name in KERNELS})
+PARALLEL = SimpleNamespace(**{name: globals().get(name + '_parallel', globals()[name])
+                              for name in KERNELS})
+
+
+def builds(rows, cols, threads):
+    """The kernel set for a level of ``rows x cols`` points run with ``threads`` numba
+    threads: the parallel builds only where they split the level among threads."""
+    return PARALLEL if threads > 1 and chunk_count(rows, cols) > 1 else SERIAL
+
+
+__all__ = ['builds', 'chunk_count', 'DRIVEN', 'FREE', 'KERNELS', 'PAR_MIN_POINTS', 'PARALLEL',
+           'PINNED', 'SERIAL', 'STENCIL_DC', 'STENCIL_DR', 'STENCIL_SIZE'] + list(KERNELS) + [
+               name + '_parallel' for name in KERNELS if name + '_parallel' in globals()]

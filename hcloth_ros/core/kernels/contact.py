@@ -1,0 +1,100 @@
+"""Contact with static obstacles: ground planes, axis-aligned boxes and spheres.
+
+A point found inside an obstacle (grown by ``margin``) is moved out along the obstacle's
+normal; its inward normal velocity stops and Coulomb friction slows its tangential
+velocity (never reversing it). See :mod:`hcloth_ros.core.scene` for the obstacle arrays.
+"""
+
+import math
+
+import numba
+from hcloth_ros.core.kernels.jit import JIT
+from hcloth_ros.core.kernels.layout import FREE
+
+
+@numba.njit(**JIT)
+def _resolve(q, qd, dv, r, c, nx, ny, nz, depth, friction):
+    """Move point (r, c) ``depth`` along the unit normal n and apply the contact's
+    velocity change (also added to the step's ``dv``)."""
+    q[0, r, c] += depth * nx
+    q[1, r, c] += depth * ny
+    q[2, r, c] += depth * nz
+    vx, vy, vz = qd[0, r, c], qd[1, r, c], qd[2, r, c]
+    vn = vx * nx + vy * ny + vz * nz
+    if vn >= 0.0:
+        return
+    tx, ty, tz = vx - vn * nx, vy - vn * ny, vz - vn * nz
+    vt = math.sqrt(tx * tx + ty * ty + tz * tz)
+    scale = max(0.0, 1.0 - friction * (-vn) / vt) if vt > 0.0 else 0.0
+    for d, new in ((0, tx * scale), (1, ty * scale), (2, tz * scale)):
+        dv[d, r, c] += new - qd[d, r, c]
+        qd[d, r, c] = new
+
+
+@numba.njit(**JIT)
+def _box_exit(q, q_prev, r, c, box, margin):
+    """The axis and side (+-1) a point inside ``box`` leaves by, or axis -1 if outside.
+
+    The face it entered by: the axis on which its start-of-step position was furthest
+    outside; the nearest face if it was already inside. (The nearest face alone pushes
+    points that fall onto a table top near its edge out sideways, tearing the cloth.)
+    """
+    axis = -1
+    entry = -1e300
+    for d in range(3):
+        if box[3 + d] + margin - abs(q[d, r, c] - box[d]) <= 0.0:
+            return -1, 0.0
+        outside_before = abs(q_prev[d, r, c] - box[d]) - box[3 + d] - margin
+        if outside_before > entry:
+            entry, axis = outside_before, d
+    if entry <= 0.0:
+        best = 1e300
+        for d in range(3):
+            pen = box[3 + d] + margin - abs(q[d, r, c] - box[d])
+            if pen < best:
+                best, axis = pen, d
+    return axis, 1.0 if (q_prev[axis, r, c] - box[axis]) >= 0.0 else -1.0
+
+
+@numba.njit(**JIT)
+def _push_out(q, qd, dv, q_prev, r, c, planes, boxes, spheres, friction, margin):
+    """Resolve every obstacle a point is inside of, in the order planes, boxes, spheres."""
+    for p in range(planes.shape[0]):
+        nx, ny, nz, offset = planes[p, 0], planes[p, 1], planes[p, 2], planes[p, 3]
+        dist = q[0, r, c] * nx + q[1, r, c] * ny + q[2, r, c] * nz - offset - margin
+        if dist < 0.0:
+            _resolve(q, qd, dv, r, c, nx, ny, nz, -dist, friction)
+    for b in range(boxes.shape[0]):
+        axis, sign = _box_exit(q, q_prev, r, c, boxes[b], margin)
+        if axis >= 0:
+            depth = boxes[b, 3 + axis] + margin - sign * (q[axis, r, c] - boxes[b, axis])
+            _resolve(q, qd, dv, r, c, sign if axis == 0 else 0.0, sign if axis == 1 else 0.0,
+                     sign if axis == 2 else 0.0, depth, friction)
+    for s in range(spheres.shape[0]):
+        dx, dy, dz = q[0, r, c] - spheres[s, 0], q[1, r, c] - spheres[s, 1], \
+            q[2, r, c] - spheres[s, 2]
+        dist = math.sqrt(dx * dx + dy * dy + dz * dz)
+        pen = spheres[s, 3] + margin - dist
+        if pen > 0.0 and dist > 0.0:
+            _resolve(q, qd, dv, r, c, dx / dist, dy / dist, dz / dist, pen, friction)
+        elif pen > 0.0:
+            _resolve(q, qd, dv, r, c, 0.0, 0.0, 1.0, pen, friction)
+
+
+@numba.njit(**JIT)
+def contact(
+        # inputs / outputs: the level after the step and its velocity change, corrected
+        q, qd, dv,
+        # inputs: positions at the start of the step (which face a point entered a box
+        # by), holds, whether inherited points belong to the coarser level
+        q_prev, hold_kind, inherited_fixed,
+        # inputs: the obstacles
+        planes, boxes, spheres, friction, margin):
+    """Push the movable points of a level out of the obstacles (held and, with
+    ``inherited_fixed``, inherited points stay where they are)."""
+    rows, cols = hold_kind.shape
+    for r in range(rows):
+        even_row = inherited_fixed and r % 2 == 0
+        for c in range(cols):
+            if hold_kind[r, c] == FREE and not (even_row and c % 2 == 0):
+                _push_out(q, qd, dv, q_prev, r, c, planes, boxes, spheres, friction, margin)

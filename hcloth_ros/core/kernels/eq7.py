@@ -1,0 +1,126 @@
+"""The paper's Table 1 on a refinement level: prolongation, constraint C and eq. 7.
+
+Level k inserts a point on every edge of level k-1. After level k-1 has stepped:
+
+* constraint C: inherited points (even row and column) take level k-1's new state;
+* eq. 7 on inserted points, from this level's state at the start of the step, with the
+  coarse velocity change prolonged (:func:`prolong`) standing in for the unknown changes
+  of the neighbours:
+
+      dv_i = (h f~_i + h^2 sum_j k_ij dv_app_j) / (m_i + h^2 K_i)
+
+  A held neighbour's own prescribed change replaces its estimate. With exact gravity the
+  estimate carries the external part once: ``h g`` is taken out of every neighbour's
+  change and added back to the result.
+"""
+
+import numba
+import numpy as np
+from numba import prange
+
+from hcloth_ros.core.kernels.jit import JIT, serial_and_parallel
+from hcloth_ros.core.kernels.layout import advance_row, chunk_count, FREE
+from hcloth_ros.core.kernels.springs import force_row, stencil_sum_row
+
+
+@numba.njit(**JIT)
+def _prolong_rows(coarse, fine, r0, r1):
+    cols, coarse_cols = fine.shape[2], coarse.shape[2]
+    for r in range(r0, r1):
+        ra, rb = r // 2, (r + 1) // 2
+        for d in range(fine.shape[0]):
+            a, b, f = coarse[d, ra], coarse[d, rb], fine[d, r]
+            for j in range(coarse_cols - 1):
+                f[2 * j] = 0.5 * (a[j] + b[j])
+                f[2 * j + 1] = 0.5 * (a[j] + b[j + 1])
+            f[cols - 1] = 0.5 * (a[coarse_cols - 1] + b[coarse_cols - 1])
+
+
+@numba.njit(**JIT)
+def prolong(coarse, fine):
+    """Fill a level-k array ``(d, rows, cols)`` from level k-1 by the parent rule.
+
+    Point (r, c) is the mean of coarse points ``(r // 2, c // 2)`` and
+    ``((r + 1) // 2, (c + 1) // 2)``: inherited points copy their coarse value, inserted
+    points take the mean of the two ends of the edge they were inserted on (the "\\"
+    diagonal for face centres). Used for eq. 7's estimate and to start a level that is
+    simulated again from the coarser state.
+    """
+    rows, cols = fine.shape[1], fine.shape[2]
+    if cols != 2 * coarse.shape[2] - 1 or rows != 2 * coarse.shape[1] - 1:
+        raise ValueError('prolong: the fine grid must have 2 n - 1 rows and columns')
+    _prolong_rows(coarse, fine, 0, rows)
+
+
+@numba.njit(**JIT)
+def _hold_estimates(hold_kind, prescribed_dv, dv_estimate):
+    """A held point's estimate is its own prescribed change."""
+    rows, cols = hold_kind.shape
+    for r in range(rows):
+        for c in range(cols):
+            if hold_kind[r, c] != FREE:
+                for d in range(3):
+                    dv_estimate[d, r, c] = prescribed_dv[d, r, c]
+
+
+@numba.njit(**JIT)
+def _inherit_row(coarse_q, coarse_qd, coarse_dv, r, q_out, qd_out, dv_out):
+    """Constraint C on an even row: its even columns take level k-1's new state."""
+    for d in range(3):
+        for c in range(0, q_out.shape[2], 2):
+            q_out[d, r, c] = coarse_q[d, r // 2, c // 2]
+            qd_out[d, r, c] = coarse_qd[d, r // 2, c // 2]
+            dv_out[d, r, c] = coarse_dv[d, r // 2, c // 2]
+
+
+@numba.njit(**JIT)
+def _eq7_rows(q, qd, mass, rest, stiffness, contraction, inv_diagonal, hold_kind,
+              prescribed_dv, h, gravity, literal, coarse_q, coarse_qd, coarse_dv,
+              dv_estimate, q_out, qd_out, dv_out, r0, r1):
+    cols = mass.shape[1]
+    fx, fy, fz = np.empty(cols), np.empty(cols), np.empty(cols)
+    sx, sy, sz = np.empty(cols), np.empty(cols), np.empty(cols)
+    h2 = h * h
+    exact = 0.0 if literal else h
+    shift = (exact * gravity[0], exact * gravity[1], exact * gravity[2])
+    for r in range(r0, r1):
+        # every column, inherited ones included (overwritten below): a contiguous loop
+        # vectorises, a stride-2 one over the inserted points would not
+        force_row(q, qd, r, rest, stiffness, contraction, h, True, fx, fy, fz)
+        stencil_sum_row(dv_estimate, r, stiffness, shift, sx, sy, sz)
+        kinds, m, w = hold_kind[r], mass[r], inv_diagonal[r]
+        for d in range(q.shape[0]):
+            force = fx if d == 0 else (fy if d == 1 else fz)
+            neighbours = sx if d == 0 else (sy if d == 1 else sz)
+            fixed, dv, g, g_exact = prescribed_dv[d, r], dv_out[d, r], gravity[d], shift[d]
+            for i in range(cols):
+                f = force[i] + m[i] * g if literal else force[i]
+                dv[i] = (fixed[i] if kinds[i] != FREE
+                         else (h * f + h2 * neighbours[i]) * w[i] + g_exact)
+            advance_row(q[d, r], qd[d, r], dv, h, q_out[d, r], qd_out[d, r])
+        if r % 2 == 0:
+            _inherit_row(coarse_q, coarse_qd, coarse_dv, r, q_out, qd_out, dv_out)
+
+
+def eq7_level(
+        # inputs: this level at the start of the step
+        q, qd, mass, rest, stiffness, contraction, inv_diagonal, hold_kind, prescribed_dv,
+        # inputs: the step
+        h, gravity, literal,
+        # inputs: level k-1 after the step, and its velocity change prolonged (the
+        # estimate; held points' entries are overwritten with their prescribed change)
+        coarse_q, coarse_qd, coarse_dv, dv_estimate,
+        # outputs: this level after the step and its velocity change
+        q_out, qd_out, dv_out):
+    """One refinement level of Table 1: constraint C, then eq. 7 on inserted points."""
+    _hold_estimates(hold_kind, prescribed_dv, dv_estimate)
+    rows, cols = mass.shape
+    chunks = chunk_count(rows, cols)
+    for ch in prange(chunks):
+        _eq7_rows(q, qd, mass, rest, stiffness, contraction, inv_diagonal, hold_kind,
+                  prescribed_dv, h, gravity, literal, coarse_q, coarse_qd, coarse_dv,
+                  dv_estimate, q_out, qd_out, dv_out, ch * rows // chunks,
+                  (ch + 1) * rows // chunks)
+
+
+eq7_level, eq7_level_parallel = serial_and_parallel(eq7_level)

@@ -1,0 +1,285 @@
+"""Strain limiting (Provot 1995) by Jacobi sweeps over structural and shear springs.
+
+A spring longer than ``limit = (1 + max_stretch) L`` pulls its movable ends towards each
+other: ``share (|d| - limit) / |d| d`` onto each end (``share`` 1 when the other end is
+fixed, 1/2 when both move), and each point moves by the mean of its springs' terms.
+Velocities (and the step's velocity change) take the same correction divided by ``h``, so
+motion stays consistent with positions. A sweep is applied only while some spring with a
+movable end exceeds its limit by more than ``tolerance`` (relative).
+
+How a sweep runs. Each spring is evaluated once, from its first end (the point it leaves
+rightwards or downwards: stencil entries 0, 2, 4, 6), and the two ends take its term with
+opposite signs; those "forward" terms of a block of rows are computed over the block as
+one flat array, neighbours found at fixed flat offsets (masks drop the row wrap-around),
+which vectorises over the whole block. A level is split into row chunks (one per thread
+on large levels) and each chunk streams through blocks of rows: a block's corrections
+need its rows and the rows next to it as they were before the sweep, so a block is
+corrected as soon as it is gathered. The spring terms of the row before each chunk
+boundary are computed first (the neighbouring chunk may correct its rows at any time);
+a chunk applies its corrections only once the sweep is known to happen, i.e. once any
+spring over the tolerance has been seen, and the rest afterwards.
+"""
+
+import numba
+import numpy as np
+from numba import prange
+
+from hcloth_ros.core.kernels.jit import JIT, serial_and_parallel
+from hcloth_ros.core.kernels.layout import chunk_count, FREE
+from hcloth_ros.core.kernels.springs import spring_vector
+
+# Points a block of rows holds at most (its spring terms stay in the core's caches).
+BLOCK_POINTS = 2048
+# Spring terms per point: 4 forward directions x (x, y, z term, over-limit flag).
+TERMS = 16
+# Whether a build splits large levels into row chunks (only the parallel one does: in one
+# thread, chunk boundaries only cost an extra row of springs each).
+SPLIT_ROWS = False
+
+
+@numba.njit(**JIT)
+def excess_threshold(limit, tolerance):
+    """Smallest float64 ``x`` with ``x / limit - 1.0 > tolerance`` (in floating point).
+
+    Both operations are monotone, so for a spring longer than ``limit`` the test
+    ``length >= threshold`` equals ``length / limit - 1.0 > tolerance`` exactly, without
+    a division. Needs ``0 < limit < inf`` and ``0 <= tolerance < inf``.
+    """
+    buf = np.empty(1)
+    bits = buf.view(np.int64)
+    buf[0] = limit
+    lo = bits[0]            # excess 0 <= tolerance
+    buf[0] = np.inf
+    hi = bits[0]            # excess inf > tolerance
+    while hi - lo > 1:      # bit patterns of positive floats are ordered like the floats
+        mid = lo + (hi - lo) // 2
+        bits[0] = mid
+        if buf[0] / limit - 1.0 > tolerance:
+            hi = mid
+        else:
+            lo = mid
+    bits[0] = hi
+    return buf[0]
+
+
+@numba.njit(**JIT)
+def _direction(q, movable, valid, lo, stop, end, offset, limit, threshold, terms, e0, base):
+    """Springs from flat points ``lo .. stop-1`` to the point ``offset`` further.
+
+    Writes the first end's term ``share (|d| - limit) / |d| d`` and the over-limit flag
+    (1.0) into ``terms[e0 .. e0+3, k - base]`` for an existing spring (``valid``, indexed
+    ``k - lo``) longer than ``limit``, zeros otherwise and for ``stop .. end-1`` (springs
+    that leave the grid). Returns how many springs with a movable end exceed the
+    tolerance (``length >= threshold``).
+    """
+    xp, yp, zp, mp = q[0, lo:], q[1, lo:], q[2, lo:], movable[lo:]
+    xn, yn, zn, mn = q[0, lo + offset:], q[1, lo + offset:], q[2, lo + offset:], \
+        movable[lo + offset:]
+    tx, ty, tz, flag = terms[e0, lo - base:], terms[e0 + 1, lo - base:], \
+        terms[e0 + 2, lo - base:], terms[e0 + 3, lo - base:]
+    count = 0
+    for i in range(stop - lo):
+        dx, dy, dz, length = spring_vector(xn, yn, zn, xp, yp, zp, i)
+        over = valid[i] > 0.0 and not (length <= limit)
+        a, b = mp[i], mn[i]
+        f = (1.0 - 0.5 * (a * b)) * (length - limit) / length
+        # a select, not a product with 0: a wrapped neighbour may be NaN
+        tx[i] = f * dx if over else 0.0
+        ty[i] = f * dy if over else 0.0
+        tz[i] = f * dz if over else 0.0
+        flag[i] = 1.0 if over else 0.0
+        count += 1 if (over and a + b > 0.0 and length >= threshold) else 0
+    for i in range(max(stop - lo, 0), end - lo):
+        tx[i] = 0.0
+        ty[i] = 0.0
+        tz[i] = 0.0
+        flag[i] = 0.0
+    return count
+
+
+@numba.njit(**JIT)
+def _forward_terms(q, movable, masks, ra, rb, rows, cols, limit, threshold, terms, base):
+    """Forward spring terms of rows ``ra .. rb-1`` into ``terms[:, k - base]``.
+
+    Directions (0, 1), (1, 0), (1, 1) and (1, -1) in entry groups 0, 4, 8 and 12;
+    ``masks[0]`` / ``masks[1]``: 1.0 where a point of a block has a right / left
+    neighbour, ``masks[2]`` all ones. Returns the springs over the tolerance.
+    """
+    n = rows * cols
+    lo, end = ra * cols, rb * cols
+    offsets = (1, cols, cols + 1, cols - 1)
+    stops = (n - 1, n - cols, n - cols - 1, n - cols)    # the partner leaves the grid
+    mask = (0, 2, 0, 1)
+    count = 0
+    for j in range(limit.shape[0]):
+        count += _direction(q, movable, masks[mask[j]], lo, min(end, stops[j]), end,
+                            offsets[j], limit[j], threshold[j], terms, 4 * j, base)
+    return count
+
+
+@numba.njit(**JIT)
+def _term_sum(terms, e, pad, cols, n, sign, out):
+    """``out[i] = sum`` of point i's eight spring terms in entry ``e`` of each group.
+
+    In stencil order: (0, 1) forward, then backward (the left neighbour's term, times
+    ``sign``), (1, 0) and (-1, 0), (1, 1) and (-1, -1), (1, -1) and (-1, 1). Point i's
+    forward terms sit at ``pad + i``; the row above ends at ``pad - 1``.
+    """
+    a0, b0 = terms[e, pad:], terms[e, pad - 1:]
+    a1, b1 = terms[4 + e, pad:], terms[4 + e, pad - cols:]
+    a2, b2 = terms[8 + e, pad:], terms[8 + e, pad - cols - 1:]
+    a3, b3 = terms[12 + e, pad:], terms[12 + e, pad - cols + 1:]
+    for i in range(n):
+        out[i] = (0.0 + a0[i] + sign * b0[i] + a1[i] + sign * b1[i] + a2[i] + sign * b2[i]
+                  + a3[i] + sign * b3[i])
+
+
+@numba.njit(**JIT)
+def _gather(movable, terms, pad, cols, lo, hi, counted, corr):
+    """Corrections of flat points ``lo .. hi-1``: the mean of their springs' terms."""
+    n = hi - lo
+    _term_sum(terms, 3, pad, cols, n, 1.0, counted)
+    m = movable[lo:]
+    for d in range(corr.shape[0]):
+        out = corr[d, lo:]
+        _term_sum(terms, d, pad, cols, n, -1.0, out)
+        for i in range(n):
+            out[i] = out[i] / counted[i] if (m[i] > 0.0 and counted[i] > 0.0) else 0.0
+
+
+@numba.njit(**JIT)
+def _apply(q, qd, dv, corr, lo, hi, h):
+    """``q += corr``, ``qd += corr / h``, ``dv += corr / h`` on flat points ``lo .. hi-1``."""
+    for d in range(q.shape[0]):
+        x, u, w, e = q[d, lo:hi], qd[d, lo:hi], dv[d, lo:hi], corr[d, lo:hi]
+        for i in range(hi - lo):
+            x[i] += e[i]
+            u[i] += e[i] / h
+            w[i] += e[i] / h
+
+
+@numba.njit(**JIT)
+def _copy_terms(src, i, dst, j, n):
+    """``dst[:, j:j+n] = src[:, i:i+n]`` (a loop: numba's slice assignment costs seconds
+    of compilation)."""
+    for e in range(src.shape[0]):
+        a, b = src[e, i:i + n], dst[e, j:j + n]
+        for k in range(n):
+            b[k] = a[k]
+
+
+@numba.njit(**JIT)
+def _chunk_sweep(q, qd, dv, corr, movable, masks, rows, cols, r0, r1, block_rows, limit,
+                 threshold, h, edge_before, edge_after, terms, counted, applied):
+    """One sweep over rows ``r0 .. r1-1`` (see the module docstring).
+
+    ``edge_before`` / ``edge_after``: the forward terms of rows ``r0 - 1`` and ``r1 - 1``
+    computed before the sweep (zeros for ``r0 = 0``; unused for ``r1 = rows``).
+    ``applied``: the sweep is known to happen. Returns the springs over the tolerance
+    counted here; rows stay uncorrected while none is seen and ``applied`` is False.
+    """
+    pad = cols + 1
+    _copy_terms(edge_before, 0, terms, 1, cols)
+    for e in range(terms.shape[0]):
+        terms[e, 0] = 0.0                   # the row above's (non-existent) last diagonal
+    count = 0
+    done = r0                               # rows r0 .. done-1 are corrected
+    for b0 in range(r0, r1, block_rows):
+        b1 = min(b0 + block_rows, r1)
+        base = b0 * cols - pad
+        # the chunk's last row reaches into the next chunk: its terms were computed first
+        own = b1 if (b1 < r1 or r1 == rows) else b1 - 1
+        count += _forward_terms(q, movable, masks, b0, own, rows, cols, limit, threshold,
+                                terms, base)
+        if own < b1:
+            _copy_terms(edge_after, 0, terms, pad + (own - b0) * cols, cols)
+        _gather(movable, terms, pad, cols, b0 * cols, b1 * cols, counted, corr)
+        if applied or count > 0:
+            _apply(q, qd, dv, corr, done * cols, b1 * cols, h)
+            done = b1
+        # carry the block's last row to the next block
+        _copy_terms(terms, pad + (b1 - 1 - b0) * cols, terms, 1, cols)
+    return count
+
+
+@numba.njit(**JIT)
+def _movable_flags(hold_kind, inherited_fixed):
+    """1.0 for points strain limiting may move: free, and not inherited from the
+    coarser level when ``inherited_fixed``."""
+    rows, cols = hold_kind.shape
+    movable = np.empty(rows * cols)
+    for r in range(rows):
+        kinds = hold_kind[r]
+        m = movable[r * cols:(r + 1) * cols]
+        even_row = inherited_fixed and r % 2 == 0
+        for c in range(cols):      # a form that vectorises
+            fixed = kinds[c] != FREE or (even_row and c % 2 == 0)
+            m[c] = 0.0 if fixed else 1.0
+    return movable
+
+
+@numba.njit(**JIT)
+def _block_masks(block_rows, cols):
+    """Per point of a block: has a right neighbour, has a left neighbour, always."""
+    masks = np.ones((3, block_rows * cols))
+    for r in range(block_rows):
+        masks[0, r * cols + cols - 1] = 0.0
+        masks[1, r * cols] = 0.0
+    return masks
+
+
+def strain_limit(q, qd, dv, rest, hold_kind, inherited_fixed, max_stretch, max_iterations,
+                 tolerance, h, corr):
+    """Limit the stretch of structural and shear springs to ``max_stretch`` (in place).
+
+    ``q, qd, dv``: the level's positions, velocities and velocity change of the step, all
+    corrected; ``rest``: per stencil entry (a spring has one rest length: entries 2 j and
+    2 j + 1 must agree); ``inherited_fixed``: on a refinement level, inherited points
+    belong to the coarser level and do not move here; ``corr``: scratch of ``q``'s shape.
+    Sweeps stop once no spring exceeds its limit by more than ``tolerance`` (relative), or
+    after ``max_iterations``. Returns the sweeps applied.
+    """
+    rows, cols = hold_kind.shape
+    limit, threshold = np.empty(4), np.empty(4)
+    for j in range(4):
+        limit[j] = (1.0 + max_stretch) * rest[2 * j]
+        if rest[2 * j + 1] != rest[2 * j]:
+            raise ValueError('strain_limit: rest lengths of opposite stencil entries differ')
+        if not (0.0 < limit[j] < np.inf and 0.0 <= tolerance < np.inf):
+            raise ValueError('strain_limit: limits must be positive, the tolerance >= 0')
+        threshold[j] = excess_threshold(limit[j], tolerance)
+    n = rows * cols
+    qf, qdf, dvf, cf = (q.reshape((3, n)), qd.reshape((3, n)), dv.reshape((3, n)),
+                        corr.reshape((3, n)))
+    movable = _movable_flags(hold_kind, inherited_fixed)
+    chunks = chunk_count(rows, cols) if SPLIT_ROWS else 1
+    block_rows = max(1, min(rows, BLOCK_POINTS // cols))
+    masks = _block_masks(block_rows, cols)
+    terms = np.empty((chunks, TERMS, cols + 1 + block_rows * cols))
+    counted = np.empty((chunks, block_rows * cols))
+    edges = np.zeros((chunks + 1, TERMS, cols))  # forward terms of the row before chunk ch
+    counts = np.zeros(chunks, dtype=np.int64)
+    for sweep in range(max_iterations):
+        at_edges = 0
+        for ch in range(1, chunks):
+            r = ch * rows // chunks - 1
+            at_edges += _forward_terms(qf, movable, masks, r, r + 1, rows, cols, limit,
+                                       threshold, edges[ch], r * cols)
+        for ch in prange(chunks):
+            counts[ch] = _chunk_sweep(qf, qdf, dvf, cf, movable, masks, rows, cols,
+                                      ch * rows // chunks, (ch + 1) * rows // chunks,
+                                      block_rows, limit, threshold, h, edges[ch],
+                                      edges[ch + 1], terms[ch], counted[ch], at_edges > 0)
+        total = at_edges
+        for ch in range(chunks):
+            total += counts[ch]
+        if total == 0:
+            return sweep    # nothing was corrected: every chunk's rows are pending
+        for ch in range(chunks):
+            if at_edges == 0 and counts[ch] == 0:   # saw no spring over the tolerance
+                _apply(qf, qdf, dvf, cf, ch * rows // chunks * cols,
+                       (ch + 1) * rows // chunks * cols, h)
+    return max_iterations
+
+
+strain_limit, strain_limit_parallel = serial_and_parallel(strain_limit, SPLIT_ROWS=True)

@@ -1,0 +1,168 @@
+"""Kernels compiled (first start on a machine) or loaded from the cache before stepping.
+
+:func:`warm_up` runs each requested solver for one step on a tiny cloth, so every kernel
+it needs is compiled with the exact argument types the solver passes. On an empty cache
+the compilation is spread over several processes first (:func:`compile_share`): numba
+compiles one function at a time per process, and a first start on 2 cores halves. The
+processes share the work through the cache: each compiles a share of the kernels and
+saves them; the warm-up then loads them all.
+"""
+
+import os
+import subprocess
+import sys
+import time
+
+import numba
+
+from hcloth_ros.core import kernels
+from hcloth_ros.core.control import Control
+from hcloth_ros.core.model import ClothBuilder
+from hcloth_ros.core.scene import make_scene
+from hcloth_ros.core.solvers import make_solver, prolong_state, SOLVERS
+from hcloth_ros.core.state import State
+
+# Seconds a kernel took to compile from an empty cache here (2 cores, numba 0.68): only
+# to balance the shares of the processes; unknown kernels count 1.
+COMPILE_SECONDS = {'strain_limit': 7.3, 'strain_limit_parallel': 6.0, 'eq7_level': 2.2,
+                   'eq7_level_parallel': 3.0, 'strain_stats': 1.9,
+                   'strain_stats_parallel': 2.5, 'eq6_first_sweep': 2.1,
+                   'eq6_second_sweep': 1.2, 'contact': 1.6, 'conjugate_gradient': 4.0,
+                   'conjugate_gradient_parallel': 3.0, 'system_apply': 1.8,
+                   'system_apply_parallel': 2.5, 'system_diagonal': 1.5, 'explicit_step': 1.5,
+                   'energy': 1.0}
+
+
+def _tiny_model():
+    """Two levels of 3 x 3 and 5 x 5 points over every kind of obstacle."""
+    scene = make_scene(ground_z=0.0, boxes=[(0, 0, -1, 1, 1, 1)], spheres=[(0, 0, -1, 0.5)])
+    return ClothBuilder(resolution=(3, 3), level_count=2, scene=scene).finalize()
+
+
+def _exercise(model, solvers, parallel, energy, builds=None):
+    """One step of each solver (and build), the energy, a level restart: every kernel
+    call the configuration makes. ``builds(name)`` overrides the kernel sets."""
+    for name in SOLVERS if solvers is None else solvers:
+        for build in ('serial', 'parallel') if parallel else ('serial',):
+            state = State.at_rest(model)
+            control = Control(model)
+            control.pin([0])
+            control.set_target(2, (1.0, 0.0, 1.0), state)
+            solver = make_solver(name, model, builds=build if builds is None else builds(build))
+            solver.step(state, control, 1e-3)
+    state = State.at_rest(model)
+    lv = model.level(0)
+    kit = kernels.SERIAL if builds is None else builds('serial')
+    if energy:
+        kit.energy(state.q[0], state.qd[0], lv.mass, lv.rest, lv.stiffness, lv.contraction,
+                   model.gravity)
+    if builds is None:
+        prolong_state(state, 1)
+    else:
+        kit.prolong(state.q[0], state.q[1])
+
+
+class _Recorder:
+    """A kernel set that records each call's dispatcher and arguments instead of
+    running it (results are harmless placeholders the solvers accept)."""
+
+    RESULTS = {'strain_limit': 0, 'strain_stats': (0.0, 0.0, True),
+               'conjugate_gradient': (1, 0.0), 'energy': (0.0, 0.0, 0.0)}
+
+    def __init__(self, kit, calls):
+        self._kit, self._calls = kit, calls
+
+    def __getattr__(self, name):
+        dispatcher = getattr(self._kit, name)
+
+        def record(*args):
+            self._calls.append((dispatcher, args))
+            return self.RESULTS.get(name)
+        return record
+
+
+def kernel_calls(solvers=None, parallel=None, energy=True):
+    """``[(dispatcher, signature)]`` a warm-up of this configuration compiles, each once."""
+    parallel = numba.get_num_threads() > 1 if parallel is None else parallel
+    calls = []
+    sets = {'serial': _Recorder(kernels.SERIAL, calls),
+            'parallel': _Recorder(kernels.PARALLEL, calls)}
+    _exercise(_tiny_model(), solvers, parallel, energy, builds=sets.__getitem__)
+    unique = {}
+    for dispatcher, args in calls:
+        signature = tuple(numba.typeof(a) for a in args)
+        unique.setdefault((dispatcher.py_func.__name__, signature), (dispatcher, signature))
+    return list(unique.values())
+
+
+def compile_share(solvers, parallel, energy, index, count):
+    """Compile share ``index`` of ``count`` of the configuration's kernels (into the
+    cache). Shares are balanced by :data:`COMPILE_SECONDS`, largest first."""
+    calls = sorted(kernel_calls(solvers, parallel, energy),
+                   key=lambda c: -COMPILE_SECONDS.get(c[0].py_func.__name__, 1.0))
+    load = [0.0] * count
+    for dispatcher, signature in calls:
+        share = load.index(min(load))
+        load[share] += COMPILE_SECONDS.get(dispatcher.py_func.__name__, 1.0)
+        if share == index:
+            dispatcher.compile(signature)
+
+
+def _stamp(solvers, parallel, energy):
+    """The file that says a configuration's kernels are in the cache (or None)."""
+    if kernels.jit.CACHE_DIR is None:
+        return None
+    import llvmlite.binding
+    names = sorted(SOLVERS if solvers is None else solvers)
+    key = '-'.join(names + ['parallel' if parallel else 'serial'] + (['energy'] if energy else [])
+                   + [numba.__version__, llvmlite.binding.get_host_cpu_name()])
+    return os.path.join(kernels.jit.CACHE_DIR, f'warm-{key}')
+
+
+def kernels_cached(solvers=None, parallel=None, energy=True):
+    """Whether :func:`warm_up` with these arguments ran on this machine before (it will
+    load, not compile: under a second instead of tens of seconds)."""
+    parallel = numba.get_num_threads() > 1 if parallel is None else parallel
+    stamp = _stamp(solvers, parallel, energy)
+    return stamp is not None and os.path.exists(stamp)
+
+
+def _compile_in_processes(solvers, parallel, energy, processes):
+    """Shares 1 .. processes-1 in child processes, share 0 here, all into the cache."""
+    code = ('import sys; from hcloth_ros.core.warmup import compile_share; '
+            'compile_share(*eval(sys.argv[1]))')
+    package_root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join(
+        [package_root] + [p for p in os.environ.get('PYTHONPATH', '').split(os.pathsep) if p]))
+    children = [subprocess.Popen([sys.executable, '-c', code,
+                                  repr((solvers, parallel, energy, i, processes))], env=env)
+                for i in range(1, processes)]
+    try:
+        compile_share(solvers, parallel, energy, 0, processes)
+    finally:
+        for child in children:
+            child.wait()
+
+
+def warm_up(solvers=None, parallel=None, energy=True, processes=None):
+    """Compile (or load from the cache) the kernels a configuration uses; returns seconds.
+
+    ``solvers``: names (default: all of :data:`SOLVERS`; the gravity mode is a flag of the
+    kernels, so either mode compiles both); ``parallel``: also the parallel builds
+    (default: when numba runs more than one thread); ``energy``: the energy kernel
+    (recordings and metrics); ``processes``: how many processes compile on an empty cache
+    (default: the cores, at most 4; 1 compiles here only). With the on-disk cache this
+    loads machine code in well under a second.
+    """
+    start = time.perf_counter()
+    parallel = numba.get_num_threads() > 1 if parallel is None else parallel
+    processes = min(os.cpu_count() or 1, 4) if processes is None else int(processes)
+    if processes > 1 and kernels.jit.CACHE_DIR is not None \
+            and not kernels_cached(solvers, parallel, energy):
+        _compile_in_processes(solvers, parallel, energy, processes)
+    _exercise(_tiny_model(), solvers, parallel, energy)
+    stamp = _stamp(solvers, parallel, energy)
+    if stamp is not None:
+        with open(stamp, 'w'):
+            pass
+    return time.perf_counter() - start

@@ -1,0 +1,116 @@
+"""The node's grippers: newest command per gripper, applied to the cloth at a tick.
+
+ROS-free (plain numbers in, log lines out), so it is tested without a graph. A flood of
+commands keeps only the newest of each gripper; nothing is queued.
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from hcloth_ros.core.control import quaternion_to_matrix
+
+
+@dataclass
+class Gripper:
+    """The newest command of one gripper."""
+
+    name: str
+    rotation: np.ndarray = None
+    translation: np.ndarray = None
+    pose_pending: bool = False
+    close_request: bool = None      # None: nothing new; True: grasp; False: release
+    grasping: bool = False
+
+
+def valid_name(name):
+    """Whether ``name`` can name a gripper's topics (non-empty, no ``/``)."""
+    return isinstance(name, str) and bool(name) and '/' not in name
+
+
+class GripperBank:
+    """Grippers by name; ``refused`` lists the names that cannot be used (empty, with a
+    ``/``, or repeated)."""
+
+    def __init__(self, names):
+        self.grippers = {}
+        self.refused = []
+        for name in names:
+            if valid_name(name) and name not in self.grippers:
+                self.grippers[name] = Gripper(name)
+            else:
+                self.refused.append(name)
+
+    def __getitem__(self, name):
+        return self.grippers[name]
+
+    def __contains__(self, name):
+        return name in self.grippers
+
+    def __iter__(self):
+        return iter(self.names())
+
+    def names(self):
+        return sorted(self.grippers)
+
+    def set_pose(self, name, frame_id, expected_frame, position, orientation):
+        """Take a target pose (``position`` xyz in m, ``orientation`` quaternion xyzw).
+
+        Returns None if taken, else ``(severity, why)`` it was dropped (``'warning'``: a
+        wrong frame; ``'error'``: a non-finite position, a zero or non-finite quaternion);
+        a dropped pose changes nothing.
+        """
+        if frame_id != expected_frame:
+            return 'warning', (f'gripper {name}: pose in frame {frame_id!r}, expected '
+                               f'{expected_frame!r} (no tf here): dropped')
+        try:
+            rotation = quaternion_to_matrix(*orientation)
+            translation = np.array(position, dtype=np.float64)
+            if translation.shape != (3,) or not np.all(np.isfinite(translation)):
+                raise ValueError(f'position must be 3 finite numbers, got {translation.tolist()}')
+        except ValueError as e:
+            return 'error', f'gripper {name}: bad pose dropped: {e}'
+        g = self.grippers[name]
+        g.rotation, g.translation, g.pose_pending = rotation, translation, True
+        return None
+
+    def request_close(self, name, closed):
+        """True: grasp at the next tick; False: release."""
+        self.grippers[name].close_request = bool(closed)
+
+    def apply(self, control, state, points_near):
+        """Apply the newest commands to ``control`` before a step.
+
+        ``points_near(position)``: the point ids a gripper closing there takes. Returns
+        ``(severity, message)`` lines to log.
+        """
+        log = []
+        for g in self.grippers.values():
+            request, g.close_request = g.close_request, None
+            if request and g.translation is None:
+                log.append(('warning', f'gripper {g.name}: close before any pose: ignored'))
+            elif request and not g.grasping:
+                ids = points_near(g.translation)
+                control.grasp(g.name, ids, state, g.rotation, g.translation)
+                g.grasping, g.pose_pending = True, False
+                log.append(('info', f'gripper {g.name}: grasped {len(ids)} points'))
+            elif request is False and g.grasping:
+                control.release(g.name)
+                g.grasping = False
+            if g.grasping and g.pose_pending:
+                control.move_grasp(g.name, g.rotation, g.translation)
+                g.pose_pending = False
+        return log
+
+    def forget_grasps(self):
+        """After a reset: nothing held, no command pending (poses are kept)."""
+        for g in self.grippers.values():
+            g.grasping, g.close_request, g.pose_pending = False, None, False
+
+
+def points_within(points, position, radius):
+    """Indices of ``points`` ``(n, 3)`` within ``radius`` of ``position``, or the nearest
+    one if none is that close."""
+    d = np.linalg.norm(points - position, axis=1)
+    ids = np.flatnonzero(d <= radius)
+    return ids if ids.size else np.array([int(np.argmin(d))])

@@ -1,0 +1,40 @@
+"""Per-tick phase times of the node, summarised when it stops."""
+
+import time
+from collections import deque
+from dataclasses import dataclass, field
+
+import numpy as np
+
+PHASES = ('step', 'pack', 'publish', 'record', 'tick')
+
+
+@dataclass
+class TickStats:
+    """Phase times (s) of every tick: percentiles over the last ``window`` ticks (10
+    minutes at 60 Hz: bounded memory on long runs), the real-time factor over the run."""
+
+    window: int = 36000
+    samples: dict = field(default_factory=dict)
+    count: int = 0
+    wall_start: float = None
+
+    def add(self, **values):
+        """Record one tick: the phase times, ``levels`` simulated and ``sim_time``."""
+        if self.wall_start is None:
+            self.wall_start = time.monotonic() - values['tick']
+        for name, value in values.items():
+            self.samples.setdefault(name, deque(maxlen=self.window)).append(value)
+        self.count += 1
+
+    def summary(self):
+        """Return p50/p99 in ms of each phase, ticks, real-time factor, levels simulated."""
+        out = {'ticks': self.count}
+        for name in PHASES:
+            ms = np.asarray(self.samples[name]) * 1e3
+            out[name] = {'p50': float(np.percentile(ms, 50)), 'p99': float(np.percentile(ms, 99))}
+        wall = time.monotonic() - self.wall_start
+        out['real_time_factor'] = self.samples['sim_time'][-1] / wall if wall > 0 else 0.0
+        out['levels_min'] = int(min(self.samples['levels']))
+        out['levels_max'] = int(max(self.samples['levels']))
+        return out
