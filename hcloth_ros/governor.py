@@ -1,11 +1,13 @@
-"""The real-time governor: how many levels the node can afford to simulate.
+"""
+The real-time governor: how many levels the node can afford to simulate.
 
 ROS-free, so it is tested with made-up tick times (``test/test_node_units.py``).
 """
 
 
 class Governor:
-    """Caps the finest simulated level so that ticks fit in the timer period.
+    """
+    Caps the finest simulated level so that ticks fit in the timer period.
 
     After ``overrun_ticks`` ticks in a row longer than the period it drops the cap by one
     level (never below ``floor``, the LOD level); after ``headroom_ticks`` ticks in a row
@@ -58,7 +60,11 @@ class Governor:
 
 
 def finest_to_simulate(consumed_all, lod_level, cap, top_level):
-    """The finest level to simulate: every level when someone consumes the finest one (a
-    cloud subscriber, a recording), else only up to the LOD marker's level; never above
-    the governor's cap nor below the LOD level."""
+    """
+    Return the finest level to simulate.
+
+    Every level when someone consumes the finest one (a cloud subscriber, a recording),
+    else only up to the LOD marker's level; never above the governor's cap nor below the
+    LOD level.
+    """
     return max(min(top_level if consumed_all else lod_level, cap), lod_level)

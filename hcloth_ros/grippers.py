@@ -1,4 +1,5 @@
-"""The node's grippers: newest command per gripper, applied to the cloth at a tick.
+"""
+The node's grippers: newest command per gripper, applied to the cloth at a tick.
 
 ROS-free (plain numbers in, log lines out), so it is tested without a graph. A flood of
 commands keeps only the newest of each gripper; nothing is queued.
@@ -6,9 +7,8 @@ commands keeps only the newest of each gripper; nothing is queued.
 
 from dataclasses import dataclass
 
-import numpy as np
-
 from hcloth_ros.core.control import quaternion_to_matrix
+import numpy as np
 
 
 @dataclass
@@ -29,8 +29,11 @@ def valid_name(name):
 
 
 class GripperBank:
-    """Grippers by name; ``refused`` lists the names that cannot be used (empty, with a
-    ``/``, or repeated)."""
+    """
+    Grippers by name.
+
+    ``refused`` lists the names that cannot be used (empty, with a ``/``, or repeated).
+    """
 
     def __init__(self, names):
         self.grippers = {}
@@ -54,7 +57,8 @@ class GripperBank:
         return sorted(self.grippers)
 
     def set_pose(self, name, frame_id, expected_frame, position, orientation):
-        """Take a target pose (``position`` xyz in m, ``orientation`` quaternion xyzw).
+        """
+        Take a target pose (``position`` xyz in m, ``orientation`` quaternion xyzw).
 
         Returns None if taken, else ``(severity, why)`` it was dropped (``'warning'``: a
         wrong frame; ``'error'``: a non-finite position, a zero or non-finite quaternion);
@@ -75,11 +79,12 @@ class GripperBank:
         return None
 
     def request_close(self, name, closed):
-        """True: grasp at the next tick; False: release."""
+        """Ask for a grasp (``closed`` true) or a release at the next tick."""
         self.grippers[name].close_request = bool(closed)
 
     def apply(self, control, state, points_near):
-        """Apply the newest commands to ``control`` before a step.
+        """
+        Apply the newest commands to ``control`` before a step.
 
         ``points_near(position)``: the point ids a gripper closing there takes. Returns
         ``(severity, message)`` lines to log.
@@ -109,8 +114,11 @@ class GripperBank:
 
 
 def points_within(points, position, radius):
-    """Indices of ``points`` ``(n, 3)`` within ``radius`` of ``position``, or the nearest
-    one if none is that close."""
+    """
+    Return the indices of ``points`` ``(n, 3)`` within ``radius`` of ``position``.
+
+    If none is that close, the nearest one.
+    """
     d = np.linalg.norm(points - position, axis=1)
     ids = np.flatnonzero(d <= radius)
     return ids if ids.size else np.array([int(np.argmin(d))])

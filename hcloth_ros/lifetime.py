@@ -1,4 +1,5 @@
-"""Process lifetime of a node: signals, the spin loop, a clean stop.
+"""
+Process lifetime of a node: signals, the spin loop, a clean stop.
 
 Ctrl-C and SIGTERM only set a flag that the spin loop checks, at any moment from the
 start of :func:`run`: an exception raised from a signal handler lands in whatever code
@@ -26,7 +27,8 @@ def request_stop(signum=None, frame=None):
 
 
 def install_signal_handlers():
-    """SIGINT and SIGTERM stop the node; ``kill -USR1 <pid>`` prints every thread's stack.
+    """
+    SIGINT and SIGTERM stop the node; ``kill -USR1 <pid>`` prints every thread's stack.
 
     SIGINT explicitly too: a shell starts background jobs with SIGINT ignored, and Python
     keeps it so.

@@ -1,4 +1,5 @@
-"""``sim_node``: the cloth simulation as a ROS 2 node (default name ``hcloth_sim``).
+"""
+``sim_node``: the cloth simulation as a ROS 2 node (default name ``hcloth_sim``).
 
 Steps the engine on a timer at ``rate_hz`` and after every tick publishes
 
@@ -30,16 +31,7 @@ import gc
 import json
 import time
 
-import numba
 from geometry_msgs.msg import PoseStamped
-from rcl_interfaces.msg import SetParametersResult
-from rclpy.node import Node
-from rclpy.qos import QoSProfile, qos_profile_sensor_data
-from sensor_msgs.msg import PointCloud2
-from std_msgs.msg import Bool
-from std_srvs.srv import Trigger
-from visualization_msgs.msg import Marker
-
 from hcloth_ros import lifetime, params
 from hcloth_ros.core import kernels_cached, warm_up
 from hcloth_ros.core.control import PINNED
@@ -49,6 +41,15 @@ from hcloth_ros.node_params import (ALL_PARAMS, check_change, descriptor, NODE_P
                                     unknown_overrides)
 from hcloth_ros.publishing import ClothPublisher
 from hcloth_ros.tick_stats import TickStats
+import numba
+from rcl_interfaces.msg import SetParametersResult
+from rclpy.node import Node
+from rclpy.qos import qos_profile_sensor_data, QoSProfile
+from sensor_msgs.msg import PointCloud2
+from std_msgs.msg import Bool
+from std_srvs.srv import Trigger
+from visualization_msgs.msg import Marker
+
 
 __all__ = ['ClothSimNode', 'main', 'NODE_PARAMS']
 
@@ -104,7 +105,8 @@ class ClothSimNode(Node):
         numba.set_num_threads(threads)
         recording = bool(self.get_parameter('rerun_path').value
                          or self.get_parameter('rerun_url').value)
-        wanted = dict(solvers=[self.solver.name], parallel=threads > 1, energy=recording)
+        wanted = {'solvers': [self.solver.name], 'parallel': threads > 1,
+                  'energy': recording}
         if not kernels_cached(**wanted):
             self.get_logger().info(
                 f'compiling the numba kernels of the {self.solver.name} solver for this '
@@ -185,8 +187,11 @@ class ClothSimNode(Node):
             self._log(*dropped)
 
     def _check_unknown_grippers(self):
-        """Name (once each) gripper topics that someone publishes to but that are not in
-        ``grippers``: ROS delivers them nowhere, so the sender would otherwise never know."""
+        """
+        Name (once each) gripper topics with publishers but no gripper of that name.
+
+        ROS delivers them nowhere, so the sender would otherwise never know.
+        """
         for topic, _ in self.get_topic_names_and_types():
             if not topic.startswith(self._gripper_prefix) or topic in self._reported_unknown:
                 continue

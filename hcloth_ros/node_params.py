@@ -1,4 +1,5 @@
-"""The node's own parameters and the checks of runtime changes (ROS-free checks).
+"""
+The node's own parameters and the checks of runtime changes (ROS-free checks).
 
 The scene parameters (cloth, scene, solver, pins) are :mod:`hcloth_ros.params`; this adds
 what only the node has (rate, frames, grippers, recording, threads) and the checks a
@@ -6,10 +7,10 @@ change must pass before anything is applied: ranges are rclpy's (from the descri
 what depends on the model (level and point counts) is checked here.
 """
 
-from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
-
 from hcloth_ros import params
 from hcloth_ros.params import Param
+from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
+
 
 NODE_PARAMS = [
     Param('rate_hz', 60.0, 'timer rate: steps and publications per second (Hz)', 1.0, 1000.0),
@@ -31,7 +32,7 @@ ALL_PARAMS = params.PARAMS + NODE_PARAMS
 
 
 def descriptor(spec):
-    """The ``ParameterDescriptor`` of a parameter: description, read-only flag, range."""
+    """Return a parameter's ``ParameterDescriptor``: description, read-only flag, range."""
     d = ParameterDescriptor(description=spec.description, read_only=spec.read_only)
     scalar = spec.default if not isinstance(spec.default, list) else None
     if spec.low is not None and not isinstance(scalar, bool):
@@ -56,7 +57,8 @@ def check_change(name, value, model):
 
 
 def unknown_overrides(given, known):
-    """Names of parameter overrides (params file, ``-p``) that match no parameter.
+    """
+    Names of parameter overrides (params file, ``-p``) that match no parameter.
 
     rclpy ignores them silently, so a misspelt ``cloth.widht`` would leave the default in
     place unseen. QoS overrides are rclpy's own.

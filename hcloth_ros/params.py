@@ -1,17 +1,19 @@
-"""The scene parameters: one table that the node declares, the README documents and the
-engine tools read from the same YAML files in ``config/``.
+"""
+The scene parameters: one table for the node, the README and the engine tools.
+
+The node declares the table, the README documents it and the engine tools read it from
+the same YAML files in ``config/``.
 
 A parameter file has the ROS 2 layout (``<node name or /**>: ros__parameters: ...``);
 nested keys become dotted names (``cloth: {width: 1.0}`` is ``cloth.width``).
 """
 
-import os
 from dataclasses import dataclass
+import os
 
+from hcloth_ros.core import ClothBuilder, Control, make_scene, make_solver, Placement, State
 import numpy as np
 import yaml
-
-from hcloth_ros.core import ClothBuilder, Control, Placement, State, make_scene, make_solver
 
 
 @dataclass(frozen=True)
@@ -64,7 +66,7 @@ PARAM_BY_NAME = {p.name: p for p in PARAMS}
 
 
 def config_path(name):
-    """A file of this package's ``config/``: installed share directory, else the source."""
+    """Return a file of this package's ``config/``: installed share directory, else the source."""
     try:
         from ament_index_python.packages import get_package_share_directory
         path = os.path.join(get_package_share_directory('hcloth_ros'), 'config', name)

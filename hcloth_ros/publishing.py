@@ -1,4 +1,5 @@
-"""What the node publishes after a tick: the finest cloud and the LOD marker.
+"""
+What the node publishes after a tick: the finest cloud and the LOD marker.
 
 Needs message types but no ROS graph: the publishers are passed in (anything with
 ``publish`` and, for the cloud, ``get_subscription_count``), so it is tested with fakes.
@@ -8,7 +9,8 @@ from hcloth_ros.ros_msgs import pointcloud2, TriangleMarker
 
 
 class ClothPublisher:
-    """Packs and publishes ``cloth/points`` and ``cloth/lod_marker``.
+    """
+    Packs and publishes ``cloth/points`` and ``cloth/lod_marker``.
 
     The cloud (the finest simulated level, point-id order) is built only while someone
     subscribes; the marker of each level keeps its ``Point`` objects between ticks

@@ -1,4 +1,5 @@
-"""A thin Rerun logger: the cloth and its metrics on a ``sim_time`` timeline.
+"""
+A thin Rerun logger: the cloth and its metrics on a ``sim_time`` timeline.
 
 Entities: ``cloth/finest`` (mesh of the finest simulated level, every
 ``finest_every``-th step), ``cloth/lod`` (mesh of the LOD level, every step),
@@ -10,11 +11,10 @@ that much, and :meth:`close` flushes and finishes it (footer included).
 
 import time
 
+from hcloth_ros.core.metrics import energy
 import numpy as np
 import rerun as rr
 import rerun.blueprint as rrb
-
-from hcloth_ros.core.metrics import energy
 
 
 METRICS = (('step_ms', 'step time (ms)'), ('real_time_factor', 'real-time factor'),
@@ -23,8 +23,12 @@ METRICS = (('step_ms', 'step time (ms)'), ('real_time_factor', 'real-time factor
 
 
 def _blueprint():
-    """The finest mesh and the LOD mesh side by side (held points in both), one plot per
-    metric (their units differ), the ``sim_time`` timeline selected."""
+    """
+    Lay out the viewer: the finest mesh and the LOD mesh side by side, the plots beside.
+
+    Held points show in both meshes; one plot per metric (their units differ); the
+    ``sim_time`` timeline selected.
+    """
     held = ['+ /cloth/pins', '+ /cloth/grasps']
     meshes = rrb.Vertical(
         rrb.Spatial3DView(origin='/', name='finest level',

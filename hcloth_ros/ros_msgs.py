@@ -1,10 +1,11 @@
-"""Pure conversions between cloth arrays and ROS 2 messages (no node, no graph).
+"""
+Pure conversions between cloth arrays and ROS 2 messages (no node, no graph).
 
 Kept apart from the node so they can be tested with plain pytest and reused by clients.
 """
 
-import numpy as np
 from geometry_msgs.msg import Point
+import numpy as np
 from sensor_msgs.msg import PointCloud2, PointField
 from std_msgs.msg import ColorRGBA
 from visualization_msgs.msg import Marker
@@ -14,7 +15,8 @@ _XYZ_FIELDS = [PointField(name=n, offset=4 * i, datatype=PointField.FLOAT32, cou
 
 
 def pointcloud2(points, frame_id, stamp):
-    """An unorganised ``PointCloud2`` with float32 ``x y z`` fields from ``(n, 3)`` metres.
+    """
+    Make an unorganised ``PointCloud2`` with float32 ``x y z`` fields from ``(n, 3)`` metres.
 
     ``data`` is assigned as ``bytes``: assigning a numpy array makes rclpy's setter walk it
     element by element (seconds for a large cloud).
@@ -37,8 +39,11 @@ def pointcloud2(points, frame_id, stamp):
 
 
 def points_from_pointcloud2(msg):
-    """``(n, 3)`` float64 positions of a cloud made by :func:`pointcloud2` (or any cloud
-    whose first three fields are float32 x, y, z at offsets 0, 4, 8)."""
+    """
+    Return the ``(n, 3)`` float64 positions of a cloud made by :func:`pointcloud2`.
+
+    Any cloud whose first three fields are float32 x, y, z at offsets 0, 4, 8 reads too.
+    """
     names = [(f.name, f.offset, f.datatype) for f in msg.fields[:3]]
     expected = [('x', 0, PointField.FLOAT32), ('y', 4, PointField.FLOAT32),
                 ('z', 8, PointField.FLOAT32)]
@@ -50,7 +55,8 @@ def points_from_pointcloud2(msg):
 
 
 class TriangleMarker:
-    """A ``TRIANGLE_LIST`` marker of one mesh topology, refilled in place every tick.
+    """
+    A ``TRIANGLE_LIST`` marker of one mesh topology, refilled in place every tick.
 
     ``Marker.points`` is a list of Python ``Point`` objects: building them afresh cost
     about 6 ms for a 33 x 33 level here. This keeps one ``Point`` per vertex, which the
@@ -77,7 +83,7 @@ class TriangleMarker:
         msg.points = [self._vertices[i] for i in triangles.ravel().tolist()]
 
     def update(self, points, stamp):
-        """The marker with the vertices at ``points`` (``(n, 3)`` metres, vertex order)."""
+        """Set the vertices to ``points`` (``(n, 3)`` metres, vertex order); return the marker."""
         points = np.asarray(points, dtype=np.float64)
         if points.shape != (self.vertex_count, 3):
             raise ValueError(f'expected ({self.vertex_count}, 3) points, got {points.shape}')

@@ -1,18 +1,23 @@
 """Per-tick phase times of the node, summarised when it stops."""
 
-import time
 from collections import deque
 from dataclasses import dataclass, field
+import time
 
 import numpy as np
+
 
 PHASES = ('step', 'pack', 'publish', 'record', 'tick')
 
 
 @dataclass
 class TickStats:
-    """Phase times (s) of every tick: percentiles over the last ``window`` ticks (10
-    minutes at 60 Hz: bounded memory on long runs), the real-time factor over the run."""
+    """
+    Phase times (s) of every tick.
+
+    Percentiles over the last ``window`` ticks (10 minutes at 60 Hz: bounded memory on
+    long runs), the real-time factor over the whole run.
+    """
 
     window: int = 36000
     samples: dict = field(default_factory=dict)

@@ -3,15 +3,14 @@
 import csv
 import json
 
-import numpy as np
-import pytest
-
 from hcloth_ros.bench import errors
 from hcloth_ros.bench.__main__ import main as bench_main
 from hcloth_ros.bench.reference import convergence_order, reference, reference_dt
-from hcloth_ros.bench.scenarios import (SAMPLE_EVERY, Run, closed_form_free_fall,
-                                        level0_side, simulate)
+from hcloth_ros.bench.scenarios import (closed_form_free_fall, level0_side, Run,
+                                        SAMPLE_EVERY, simulate)
 from hcloth_ros.bench.stability import explicit_boundary_check
+import numpy as np
+import pytest
 
 G = 9.81
 
@@ -63,7 +62,7 @@ def test_explicit_free_fall_error_is_the_first_order_term():
     # symplectic Euler from rest: z_n = z_0 - g h^2 n (n + 1) / 2, so against the closed
     # form every point is g h t / 2 too low (t = n h); the RMS over samples follows
     dt, duration = 1 / 240, 0.4
-    run = simulate('free_fall', 'explicit', 5, 1, dt, duration, options=dict(strain_limit=None))
+    run = simulate('free_fall', 'explicit', 5, 1, dt, duration, options={'strain_limit': None})
     exact = closed_form_free_fall(5, duration)
     expected = np.sqrt(np.mean((G * dt * exact.times / 2) ** 2))
     assert errors.position_rms(run, exact) == pytest.approx(expected, rel=1e-6)
@@ -83,7 +82,7 @@ def test_reference_converges_at_first_order_and_checks_itself():
 
 
 def test_explicit_boundary_check_brackets_the_theory():
-    rows = [dict(method='explicit', k=1e3, dt=dt, status=s) for dt, s in
+    rows = [{'method': 'explicit', 'k': 1e3, 'dt': dt, 'status': s} for dt, s in
             ((1e-3, errors.STABLE), (2e-3, errors.STABLE), (4e-3, errors.BLOWN_UP))]
     assert explicit_boundary_check(rows, {1e3: 3e-3})[0]['consistent'] is True
     assert explicit_boundary_check(rows, {1e3: 1.5e-3})[0]['consistent'] is False
@@ -96,6 +95,7 @@ def test_level_split_of_the_finest_mesh():
         level0_side(33, 7)
 
 
+@pytest.mark.slow
 def test_tiny_benchmark_writes_well_formed_outputs(tmp_path):
     bench_main(['--tiny', '--out', str(tmp_path), '--no-progress'])
     for name in ('accuracy', 'stability', 'fig3_5', 'fig6'):

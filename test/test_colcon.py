@@ -8,6 +8,10 @@ import sys
 import time
 
 from ament_index_python.packages import get_package_prefix
+import pytest
+
+# colcon build and a fresh compile of the installed copy: tens of seconds
+pytestmark = pytest.mark.slow
 
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 

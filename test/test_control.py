@@ -1,14 +1,16 @@
-"""Pins, grasps and kinematic targets (control.py) through every solver, input checking,
-refused steps and determinism."""
+"""
+Pins, grasps and kinematic targets (control.py) through every solver.
+
+Also input checking, refused steps and determinism.
+"""
 
 import math
 
+from hcloth_ros.core import (ClothBuilder, Control, make_scene, make_solver, Placement,
+                             SOLVERS, State)
 import numba
 import numpy as np
 import pytest
-
-from hcloth_ros.core import (SOLVERS, ClothBuilder, Control, Placement, State, make_scene,
-                             make_solver)
 
 
 def small_model(levels=2, k=1000.0):

@@ -2,11 +2,11 @@
 
 import os
 
-import matplotlib.image as mpimg
-import numpy as np
-
 from hcloth_ros import params
 from hcloth_ros.demo import headless as demo
+import matplotlib.image as mpimg
+import numpy as np
+import pytest
 
 
 def test_demo_writes_snapshots_and_curves(tmp_path, capsys):
@@ -32,6 +32,7 @@ def test_demo_simulation_follows_the_scene():
     assert np.array_equal(s0.points(3)[pins], s1.points(3)[pins])
 
 
+@pytest.mark.slow
 def test_fold_demo_folds_the_cloth_and_leaves_a_recording(tmp_path, monkeypatch):
     # The README's run command: node + scripted client in separate processes over DDS.
     # After the fold the two corners that started at y = -0.5 lie near the far edge

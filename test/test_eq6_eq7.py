@@ -1,4 +1,5 @@
-"""Eq. 6 and eq. 7 of the paper against their definitions, built densely in numpy.
+"""
+Eq. 6 and eq. 7 of the paper against their definitions, built densely in numpy.
 
 Eq. 6 is two Jacobi sweeps, started from dv = 0, of the linearised backward-Euler system
 (paper eq. 3) ``A dv = b`` with
@@ -17,12 +18,11 @@ summation, so results agree to rounding: 1e-12 relative to the size of the veloc
 (~1e4 ulp of slack for sums of a dozen O(1e3) terms).
 """
 
-import numpy as np
-import pytest
-
-from hcloth_ros.core import ClothBuilder, Control, State, make_solver
+from hcloth_ros.core import ClothBuilder, Control, make_solver, State
 from hcloth_ros.core import kernels
 from hcloth_ros.core.model import STENCIL_DC, STENCIL_DR
+import numpy as np
+import pytest
 
 H = 1.0 / 60.0
 RTOL = 1e-12
@@ -58,8 +58,11 @@ class DenseLevel:
         self.jac = np.kron(kmat - np.diag(self.ksum), np.eye(3))
 
     def forces(self, x, contraction):
-        """Spring forces (n, 3) with contraction resistance: a compressed spring pushes
-        back with c times its force."""
+        """
+        Spring forces with contraction resistance, shape (n, 3).
+
+        A compressed spring pushes back with c times its force.
+        """
         f = np.zeros((self.n, 3))
         for i, j, kij, rest in self.springs:
             d = x[j] - x[i]
@@ -83,8 +86,11 @@ class DenseLevel:
 
 
 def two_jacobi_sweeps(a_mat, b, held, held_value):
-    """Two Jacobi sweeps from 0 on ``a_mat x = b`` with Dirichlet rows for ``held``
-    points (index arrays of points; their value is ``held_value``, shape (len, 3))."""
+    """
+    Two Jacobi sweeps from 0 on ``a_mat x = b`` with Dirichlet rows for ``held`` points.
+
+    ``held`` is an index array of points; their value is ``held_value``, shape (len, 3).
+    """
     a_mat = a_mat.copy()
     b = b.copy()
     for m, i in enumerate(held):

@@ -1,16 +1,16 @@
-"""The hierarchy of grids (paper section IV): counts, numbering, parents, masses, LOD.
+"""
+The hierarchy of grids (paper section IV): counts, numbering, parents, masses, LOD.
 
 The model is deliberately non-square (3 points along u, 4 along v, and a rectangle of
 0.6 m x 0.9 m) and placed with a tilted frame, so that any mix-up of rows and columns, or
 of width and height, changes a number that is asserted here.
 """
 
-import numpy as np
-import pytest
-
 from hcloth_ros.core import ClothBuilder, Placement, State
 from hcloth_ros.core import kernels
 from hcloth_ros.core.model import STENCIL_DC, STENCIL_DR
+import numpy as np
+import pytest
 
 WIDTH, HEIGHT = 0.6, 0.9        # m, along axis_u (columns) and axis_v (rows)
 RES = (3, 4)                    # level-0 points along u, along v

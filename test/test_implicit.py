@@ -1,11 +1,14 @@
-"""The backward-Euler reference (``make_solver('implicit', ...)``): convergence to its
-tolerance, the backward-Euler residual, exact free fall and stability at large steps."""
+"""
+The backward-Euler reference (``make_solver('implicit', ...)``).
 
+Convergence to its tolerance, the backward-Euler residual, exact free fall and stability
+at large steps.
+"""
+
+from hcloth_ros.core import ClothBuilder, Control, make_solver, State
+from hcloth_ros.core import kernels
 import numpy as np
 import pytest
-
-from hcloth_ros.core import ClothBuilder, Control, State, make_solver
-from hcloth_ros.core import kernels
 
 H = 1.0 / 30.0
 
@@ -26,8 +29,11 @@ def pinned_corners(model):
 
 @pytest.fixture(scope='module')
 def swinging():
-    """A cloth pinned at two corners, 5 steps into its swing (springs stretched and some
-    compressed: the harder case for Newton)."""
+    """
+    Return a cloth pinned at two corners, 5 steps into its swing.
+
+    Springs are stretched and some compressed: the harder case for Newton.
+    """
     model = hanging_model()
     control = pinned_corners(model)
     state = State.at_rest(model)

@@ -1,4 +1,5 @@
-"""The numba kernels against plain numpy implementations of the same formulas.
+"""
+The numba kernels against plain numpy implementations of the same formulas.
 
 The per-step kernels work along whole rows (each stencil direction one loop over the
 columns whose neighbour exists, border points included); strain limiting evaluates each
@@ -21,11 +22,10 @@ chunks in the parallel builds), randomly perturbed, with held points in the inte
 and on the border.
 """
 
-import numpy as np
-import pytest
-
 from hcloth_ros.core import kernels
 from hcloth_ros.core.model import STENCIL_DC, STENCIL_DR
+import numpy as np
+import pytest
 
 RTOL = 1e-12
 H = 1.0 / 60.0
@@ -49,8 +49,11 @@ def close(actual, expected, what):
 
 
 def shift(a, dr, dc):
-    """``out[..., r, c] = a[..., r + dr, c + dc]`` where that exists (else 0) and the mask
-    of where it exists."""
+    """
+    Shift ``a`` by ``(dr, dc)``: ``out[..., r, c] = a[..., r + dr, c + dc]``.
+
+    Where that does not exist ``out`` is 0; also returns the mask of where it exists.
+    """
     rows, cols = a.shape[-2:]
     out = np.zeros_like(a)
     valid = np.zeros((rows, cols), dtype=bool)
@@ -179,9 +182,12 @@ def ref_prolong(coarse, rows, cols):
 # --- inputs -------------------------------------------------------------------------------
 
 def make_level(rows, cols, seed, stretch=1.0, noise=0.15, held=6):
-    """A grid of spacing ``du * stretch`` with random offsets, springs of the model's
-    stencil, random masses and velocities, some pinned and driven points (a few on the
-    border, some inside) and random prescribed changes."""
+    """
+    Make a grid of spacing ``du * stretch`` with random offsets.
+
+    With springs of the model's stencil, random masses and velocities, some pinned and
+    driven points (a few on the border, some inside) and random prescribed changes.
+    """
     rng = np.random.default_rng(seed)
     du = 1.0 / (cols - 1)
     dv_ = 1.3 / (rows - 1)
@@ -198,9 +204,9 @@ def make_level(rows, cols, seed, stretch=1.0, noise=0.15, held=6):
         kind[rng.integers(rows), rng.integers(cols)] = 1 + i % 2
     kind[0, 0] = 1
     kind[rows - 1, cols // 2] = 2
-    return dict(q=np.ascontiguousarray(q), qd=rng.standard_normal((3, rows, cols)) * 0.2,
-                mass=mass, dinv=dinv, rest=rest, stiff=stiff, kind=kind,
-                presc=rng.standard_normal((3, rows, cols)) * 0.1, rng=rng)
+    return {'q': np.ascontiguousarray(q), 'qd': rng.standard_normal((3, rows, cols)) * 0.2,
+            'mass': mass, 'dinv': dinv, 'rest': rest, 'stiff': stiff, 'kind': kind,
+            'presc': rng.standard_normal((3, rows, cols)) * 0.1, 'rng': rng}
 
 
 def full(shape):
@@ -307,9 +313,12 @@ def test_strain_limit(rows, cols, inherited_fixed, stretch, noise, iterations, t
 @BUILDS
 @pytest.mark.parametrize('rows,cols', SHAPES)
 def test_strain_limit_nan(rows, cols, kit):
-    """A non-finite point spreads NaN to its neighbours' corrections exactly as the
-    per-point form does (and its own springs do not count towards the stopping test),
-    nothing else is touched by it."""
+    """
+    A non-finite point spreads NaN exactly as the per-point form does.
+
+    NaN reaches its neighbours' corrections (and its own springs do not count towards
+    the stopping test); nothing else is touched by it.
+    """
     lv = make_level(rows, cols, seed=9, stretch=1.0, noise=0.1)
     q0 = lv['q'].copy()
     q0[2, rows // 2, cols - 1] = np.nan      # on the border: wrapped neighbours in a row
@@ -328,8 +337,12 @@ def test_strain_limit_nan(rows, cols, kit):
 
 @pytest.mark.parametrize('rows,cols', SHAPES)
 def test_strain_limit_asymmetric_rest(rows, cols):
-    """A spring has one rest length: rest lengths that differ between opposite stencil
-    entries (no model makes them) are refused, and nothing moves."""
+    """
+    A spring has one rest length.
+
+    Rest lengths that differ between opposite stencil entries (no model makes them) are
+    refused, and nothing moves.
+    """
     lv = make_level(rows, cols, seed=5, stretch=1.1, noise=0.2)
     rest = lv['rest'].copy()
     rest[1] *= 1.05
@@ -383,9 +396,12 @@ def test_prescribe():
 @pytest.mark.parametrize('limit', [0.011, 1.0 / 64.0 * 1.1, 0.0884, 3.0])
 @pytest.mark.parametrize('tolerance', [0.0, 1e-9, 0.005, 0.3])
 def test_excess_threshold(limit, tolerance):
-    """The strain limiter's stopping test ``length >= threshold`` is exactly the division
-    form ``length / limit - 1 > tolerance``: true at the threshold, false one float
-    below it."""
+    """
+    The strain limiter's stopping test ``length >= threshold`` is the division form.
+
+    It is exactly ``length / limit - 1 > tolerance``: true at the threshold, false one
+    float below it.
+    """
     t = kernels.excess_threshold(limit, tolerance)
     assert t / limit - 1.0 > tolerance
     below = np.nextafter(t, 0.0)
@@ -393,8 +409,11 @@ def test_excess_threshold(limit, tolerance):
 
 
 def ref_system_apply(q, rest, stiff, contraction, mass, free, h, p):
-    """``(M - h^2 J) p`` with the clamped spring blocks ``k (b I + (1 - b) u u^T)``,
-    ``b = max(0, 1 - L / |d|)``; identity on held points."""
+    """
+    Compute ``(M - h^2 J) p`` with the clamped spring blocks ``k (b I + (1 - b) u u^T)``.
+
+    Here ``b = max(0, 1 - L / |d|)``; identity on held points.
+    """
     h2 = h * h
     out = mass * p
     with np.errstate(divide='ignore', invalid='ignore'):
@@ -418,8 +437,12 @@ def ref_system_apply(q, rest, stiff, contraction, mass, free, h, p):
 @pytest.mark.parametrize('rows,cols', SHAPES)
 @pytest.mark.parametrize('contraction', [1.0, 0.3])
 def test_system_apply_and_cg(rows, cols, contraction, kit):
-    """The backward-Euler system of the implicit solver, and CG on it: the solution's
-    residual, computed with the reference product, is within the requested tolerance."""
+    """
+    The backward-Euler system of the implicit solver, and CG on it.
+
+    The solution's residual, computed with the reference product, is within the
+    requested tolerance.
+    """
     lv = make_level(rows, cols, seed=13, noise=0.3)
     q = lv['q'].copy()
     q[:, rows // 2, cols // 2] = q[:, rows // 2, cols // 2 - 1]    # a zero-length spring
@@ -427,7 +450,7 @@ def test_system_apply_and_cg(rows, cols, contraction, kit):
     p = lv['rng'].standard_normal(q.shape)
     out = full(q.shape)
     kit.system_apply(q, lv['rest'], lv['stiff'], contraction, lv['mass'], free, H, p,
-                         out)
+                     out)
     close(out, ref_system_apply(q, lv['rest'], lv['stiff'], contraction, lv['mass'], free,
                                 H, p), 'system_apply')
     b = lv['rng'].standard_normal(q.shape) * free
@@ -436,8 +459,8 @@ def test_system_apply_and_cg(rows, cols, contraction, kit):
                             diag)
     x, r, z, pp, ap = (np.zeros_like(q) for _ in range(5))
     iters, rel = kit.conjugate_gradient(q, lv['rest'], lv['stiff'], contraction,
-                                            lv['mass'], free, H, b, x, diag, 1e-10, 2000,
-                                            r, z, pp, ap)
+                                        lv['mass'], free, H, b, x, diag, 1e-10, 2000,
+                                        r, z, pp, ap)
     assert 0 < iters < 2000 and rel <= 1e-10
     residual = b - ref_system_apply(q, lv['rest'], lv['stiff'], contraction, lv['mass'],
                                     free, H, x)

@@ -2,10 +2,12 @@
 
 import time
 
+from geometry_msgs.msg import PoseStamped
+from hcloth_ros.node import ClothSimNode
+from hcloth_ros.ros_msgs import points_from_pointcloud2
 import numpy as np
 import pytest
 import rclpy
-from geometry_msgs.msg import PoseStamped
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.parameter import Parameter
 from rclpy.qos import qos_profile_sensor_data
@@ -13,9 +15,6 @@ from sensor_msgs.msg import PointCloud2
 from std_msgs.msg import Bool
 from std_srvs.srv import Trigger
 from visualization_msgs.msg import Marker
-
-from hcloth_ros.node import ClothSimNode
-from hcloth_ros.ros_msgs import points_from_pointcloud2
 
 
 @pytest.fixture

@@ -3,10 +3,9 @@
 import glob
 import os
 
+from hcloth_ros import params
 import numpy as np
 import pytest
-
-from hcloth_ros import params
 
 CONFIG = os.path.join(os.path.dirname(os.path.dirname(__file__)), 'config')
 

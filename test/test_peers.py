@@ -1,4 +1,5 @@
-"""The peer simulators on our scene (hcloth_ros.bench.peers).
+"""
+The peer simulators on our scene (hcloth_ros.bench.peers).
 
 The peers are optional extras (``pip install mujoco==3.14.0 pybullet==3.2.7``): every test
 of a peer starts with ``pytest.importorskip`` so the suite passes without them.
@@ -6,10 +7,9 @@ of a peer starts with ``pytest.importorskip`` so the suite passes without them.
 
 import sys
 
+from hcloth_ros.bench import peers
 import numpy as np
 import pytest
-
-from hcloth_ros.bench import peers
 
 N = 9
 LADDER = (1 / 30, 1 / 60, 1 / 120, 1 / 240, 1 / 480, 1 / 960, 1 / 1920)
@@ -110,10 +110,13 @@ def test_pybullet_largest_plausible_step():
 
 
 def test_mujoco_membrane_matches_the_springs():
-    """Probe MuJoCo's membrane as built (E, nu, thickness of mujoco_membrane): small
-    affine strains of a free flat flex, energy from the passive forces. Along the grid
-    axes it must reproduce the spring grid's uniaxial modulus and lateral contraction
-    (1983 N/m, 0.417) to 1 %; its shear is the documented 700 N/m."""
+    """
+    Probe MuJoCo's membrane as built (E, nu, thickness of mujoco_membrane).
+
+    Small affine strains of a free flat flex, energy from the passive forces. Along the
+    grid axes it must reproduce the spring grid's uniaxial modulus and lateral contraction
+    (1983 N/m, 0.417) to 1 %; its shear is the documented 700 N/m.
+    """
     mujoco = pytest.importorskip('mujoco')
     young, poisson = peers.mujoco_membrane()
     xml = f"""
@@ -176,8 +179,12 @@ def test_scene_helpers():
 
 
 def test_a_blow_up_ends_the_run_as_not_finite():
-    """No peer blows up to NaN at n = 9 on the ladder (PyBullet's blow-ups stay finite and
-    are caught by the strain), so drive the sampling loop with a fake engine."""
+    """
+    A blow-up to NaN ends the run as not finite.
+
+    No peer blows up to NaN at n = 9 on the ladder (PyBullet's blow-ups stay finite and
+    are caught by the strain), so drive the sampling loop with a fake engine.
+    """
     x = peers.grid_points(N)
     state = {'steps': 0}
 

@@ -1,12 +1,11 @@
 """Physics of the engine against closed-form results and the paper's claims."""
 
-import numpy as np
-import pytest
-
-from hcloth_ros.core import (ClothBuilder, Control, Placement, State, make_scene,
-                             make_solver)
+from hcloth_ros.core import (ClothBuilder, Control, make_scene, make_solver, Placement,
+                             State)
 from hcloth_ros.core.metrics import (centre_of_mass, centre_of_mass_velocity, energy,
                                      explicit_step_bound, explicit_step_limit, wrinkliness)
+import numpy as np
+import pytest
 
 G = 9.81
 
@@ -108,7 +107,8 @@ def test_approximate_methods_stable_where_explicit_blows_up(name, external):
     # Stiff springs (1e4 N/m on a 33x33 finest grid, 0.2 kg) at dt = 1/30 s: the
     # explicit limit is far below (checked), explicit is refused within a few steps,
     # the approximate implicit methods run 3 s with every step accepted and finite.
-    builder = dict(resolution=(9, 9), level_count=3, k_struct=1e4, k_shear=1e4, k_bend=1e3)
+    builder = {'resolution': (9, 9), 'level_count': 3, 'k_struct': 1e4, 'k_shear': 1e4,
+               'k_bend': 1e3}
     model = ClothBuilder(**builder).finalize()
     h = 1 / 30
     coarse = ClothBuilder(**dict(builder, level_count=1)).finalize()

@@ -2,17 +2,16 @@
 
 import time
 
+from hcloth_ros.node import ClothSimNode
 import numpy as np
 import rclpy
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.parameter import Parameter
 from rerun.chunk import RrdReader
 
-from hcloth_ros.node import ClothSimNode
-
 
 def _rows(path):
-    """entity path -> (rows on the sim_time timeline, column names)"""
+    """Map entity path -> (rows on the sim_time timeline, column names)."""
     out = {}
     for chunk in RrdReader(path).stream():
         batch = chunk.to_record_batch()

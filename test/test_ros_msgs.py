@@ -1,12 +1,11 @@
 """Message conversions, without a ROS graph."""
 
+from builtin_interfaces.msg import Time
+from hcloth_ros.core import ClothBuilder, State
+from hcloth_ros.ros_msgs import pointcloud2, points_from_pointcloud2, TriangleMarker
 import numpy as np
 import pytest
-from builtin_interfaces.msg import Time
 from visualization_msgs.msg import Marker
-
-from hcloth_ros.core import ClothBuilder, State
-from hcloth_ros.ros_msgs import points_from_pointcloud2, pointcloud2, TriangleMarker
 
 
 def test_pointcloud2_round_trip_is_float32_exact():

@@ -7,22 +7,24 @@ import subprocess
 import sys
 import time
 
+from ament_index_python.packages import get_package_prefix
+from hcloth_ros.ros_msgs import points_from_pointcloud2
 import numpy as np
 import pytest
 import rclpy
-from ament_index_python.packages import get_package_prefix
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.qos import qos_profile_sensor_data
 from rerun.chunk import RrdReader
 from sensor_msgs.msg import PointCloud2
 
-from hcloth_ros.ros_msgs import points_from_pointcloud2
+# nodes in other processes, several seconds each
+pytestmark = pytest.mark.slow
 
 PREFIX = sys.prefix    # .ci/setup lays out the ament prefix in the venv
 
 
 def resolve_like_ros2_run(package, executable, env):
-    """What `ros2 run PKG EXE` executes: <prefix from the ament index>/lib/PKG/EXE."""
+    """Return what `ros2 run PKG EXE` executes: <prefix from the ament index>/lib/PKG/EXE."""
     old = os.environ.get('AMENT_PREFIX_PATH')
     os.environ['AMENT_PREFIX_PATH'] = env['AMENT_PREFIX_PATH']
     try:

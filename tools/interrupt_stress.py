@@ -1,6 +1,8 @@
-"""Start sim_node many times and interrupt each start at a random moment: counts clean
-exits, deaths by signal and hangs (the figures on signal handling in the notes come from
-this; about 2.5 s a start).
+"""
+Start sim_node many times and interrupt each start at a random moment.
+
+Counts clean exits, deaths by signal and hangs (the figures on signal handling in the
+notes come from this; about 2.5 s a start).
 
     AMENT_PREFIX_PATH=$PWD/.venv .venv/bin/python tools/interrupt_stress.py --starts 50
 
@@ -11,11 +13,11 @@ prints every thread's stack) and is killed, and its stderr is printed.
 import argparse
 import collections
 import os
+from pathlib import Path
 import random
 import signal
 import subprocess
 import time
-from pathlib import Path
 
 
 def main(argv=None):

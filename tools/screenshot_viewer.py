@@ -1,5 +1,7 @@
-"""Screenshot the Rerun web viewer showing a recording, headless (regenerates
-doc/rerun_viewer.png; about 2 minutes on 2 cores, the viewer renders in software).
+"""
+Screenshot the Rerun web viewer showing a recording, headless (regenerates doc/rerun_viewer.png).
+
+About 2 minutes on 2 cores: the viewer renders in software.
 
     .venv/bin/pip install websocket-client     # not a project dependency
     apt-get install chromium                   # Debian's
@@ -15,13 +17,13 @@ import argparse
 import base64
 import json
 import os
+from pathlib import Path
 import signal
 import subprocess
 import sys
 import tempfile
 import time
 import urllib.request
-from pathlib import Path
 
 import websocket
 
@@ -32,7 +34,7 @@ CHROMIUM_FLAGS = ['--headless', '--no-sandbox', '--disable-gpu', '--use-angle=sw
 
 
 def _devtools_page(port, timeout=20.0):
-    """The websocket url of Chromium's first page, once its DevTools endpoint answers."""
+    """Return the websocket url of Chromium's first page, once its DevTools endpoint answers."""
     end = time.monotonic() + timeout
     while time.monotonic() < end:
         try:

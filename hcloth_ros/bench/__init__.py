@@ -1,2 +1,5 @@
-"""The evidence benchmark (``hcloth_bench`` / ``python -m hcloth_ros.bench``): speed
-against accuracy, stability maps, the paper's figures and the peer simulators."""
+"""
+The evidence benchmark (``hcloth_bench`` / ``python -m hcloth_ros.bench``).
+
+Speed against accuracy, stability maps, the paper's figures and the peer simulators.
+"""

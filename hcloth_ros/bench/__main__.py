@@ -1,4 +1,5 @@
-"""``hcloth_bench`` / ``python -m hcloth_ros.bench``: regenerate every chart and number.
+"""
+``hcloth_bench`` / ``python -m hcloth_ros.bench``: regenerate every chart and number.
 
     hcloth_bench --out doc/bench            # full: the README's charts (about 30 min)
     hcloth_bench --quick --out out/bench    # a few minutes
@@ -6,8 +7,9 @@
 
 Writes into ``--out``: ``results.json`` (every number, with the plan and the machine),
 ``summary.md`` (the README's tables), ``accuracy.csv``, ``stability.csv``, ``violent.csv``,
-``peers.csv``, ``fig4.csv`` and the charts ``accuracy.png``, ``stability.png``, ``fig3_5.png``, ``fig6.png``. Every run uses
-one numba thread, as the peers do, so costs compare like with like.
+``peers.csv``, ``fig4.csv`` and the charts ``accuracy.png``, ``stability.png``,
+``fig3_5.png``, ``fig6.png``. Every run uses one numba thread, as the peers do, so costs
+compare like with like.
 """
 
 import argparse
@@ -17,12 +19,11 @@ import os
 import platform
 import time
 
+from hcloth_ros.bench import accuracy, paper, report, stability, versus
+from hcloth_ros.bench.plan import FULL, Plan, PLANS, QUICK, TINY
+from hcloth_ros.core import warm_up
 import numba
 import numpy as np
-
-from hcloth_ros.bench import accuracy, paper, report, stability, versus
-from hcloth_ros.bench.plan import FULL, PLANS, QUICK, TINY, Plan
-from hcloth_ros.core import warm_up
 
 SECTIONS = ('accuracy', 'stability', 'paper', 'peers')
 
@@ -75,8 +76,11 @@ def _jsonable(value):
 
 
 def _previous(out, plan):
-    """The results already in ``out`` from the same plan (so ``--only`` re-runs a section
-    and keeps the others), else nothing."""
+    """
+    Return the results already in ``out`` from the same plan, else nothing.
+
+    So ``--only`` re-runs a section and keeps the others.
+    """
     try:
         with open(os.path.join(out, 'results.json')) as f:
             old = json.load(f)
@@ -86,7 +90,7 @@ def _previous(out, plan):
 
 
 def _estimate(plan, sections):
-    """Runs per section, for the progress bar's total (references count as runs)."""
+    """Count the runs of the sections, for the progress bar's total (references count as runs)."""
     total = 0
     if 'accuracy' in sections:
         total += len(accuracy.jobs(plan)) + len(plan.scenarios) * len(plan.sizes)
@@ -100,16 +104,19 @@ def _estimate(plan, sections):
 
 
 def run(plan, out, sections=SECTIONS, show_progress=True):
-    """Run the chosen sections of ``plan``, write everything into ``out``; returns the
-    results dict (what ``results.json`` holds)."""
+    """
+    Run the chosen sections of ``plan`` and write everything into ``out``.
+
+    Returns the results dict (what ``results.json`` holds).
+    """
     os.makedirs(out, exist_ok=True)
     numba.set_num_threads(1)
     warm_up()
     started = time.perf_counter()
     results = _previous(out, plan)
-    results.update(plan=plan.__dict__, machine=dict(
-        cpus=os.cpu_count(), processor=platform.processor() or platform.machine(),
-        python=platform.python_version(), numba=numba.__version__, numba_threads=1))
+    results.update(plan=plan.__dict__, machine={
+        'cpus': os.cpu_count(), 'processor': platform.processor() or platform.machine(),
+        'python': platform.python_version(), 'numba': numba.__version__, 'numba_threads': 1})
     progress = Progress(_estimate(plan, sections), show_progress)
     try:
         if 'accuracy' in sections:
@@ -130,9 +137,9 @@ def run(plan, out, sections=SECTIONS, show_progress=True):
         if 'paper' in sections:
             n, runs = paper.fig3_runs(plan, progress)
             paper.chart_fig3(n, runs, os.path.join(out, 'fig3_5.png'))
-            results['fig3_5'] = {label: dict(com_z_end=float(r.com[-1, 2]),
-                                             com_z_drop_max=float(1.5 - r.com[:, 2].min()),
-                                             max_strain=r.max_strain, failed=r.failed)
+            results['fig3_5'] = {label: {'com_z_end': float(r.com[-1, 2]),
+                                         'com_z_drop_max': float(1.5 - r.com[:, 2].min()),
+                                         'max_strain': r.max_strain, 'failed': r.failed}
                                  for label, r in runs.items()}
             n, wrinkles = paper.fig6_runs(plan, progress)
             paper.chart_fig6(n, wrinkles, os.path.join(out, 'fig6.png'))
@@ -179,7 +186,7 @@ def main(argv=None):
 
 
 def replot(out):
-    """Charts and tables again from ``out/results.json`` (after a change of style)."""
+    """Redraw the charts and tables from ``out/results.json`` (after a change of style)."""
     with open(os.path.join(out, 'results.json')) as f:
         results = json.load(f)
     plan = Plan(**{k: tuple(v) if isinstance(v, list) else v
@@ -197,7 +204,7 @@ def replot(out):
 
 
 def summary(results):
-    """The headline figures as text."""
+    """Return the headline figures as text."""
     lines = []
     for row in results.get('explicit_limit_check', []):
         lines.append(f'explicit k={row["k"]:g}: theory {row["theory"]:.2e} s, stable up to '

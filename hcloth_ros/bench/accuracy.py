@@ -1,11 +1,10 @@
 """Speed against accuracy: every method, step and mesh against a converged reference."""
 
-import numpy as np
-
 from hcloth_ros.bench import errors
 from hcloth_ros.bench.plan import accuracy_methods
 from hcloth_ros.bench.reference import reference, reference_dt
 from hcloth_ros.bench.scenarios import SAMPLE_EVERY, simulate
+import numpy as np
 
 
 def explicit_dts(n):
@@ -31,8 +30,12 @@ def jobs(plan):
 
 
 def sweep(plan, progress):
-    """Run every job; ``progress(text)`` is called before each. Returns ``(rows, refs)``:
-    one dict per run and the reference self-check per ``(scenario, n)``."""
+    """
+    Run every job; ``progress(text)`` is called before each.
+
+    Returns ``(rows, refs)``: one dict per run and the reference self-check per
+    ``(scenario, n)``.
+    """
     rows, refs = [], {}
     for scenario, n, m, dt in jobs(plan):
         key = (scenario, n)
@@ -42,10 +45,10 @@ def sweep(plan, progress):
         ref, check = refs[key]
         progress(f'{scenario} n={n} {m.label} dt=1/{1 / dt:.0f}')
         run = simulate(scenario, m.solver, n, m.levels, dt, plan.duration, options=m.kwargs)
-        row = dict(scenario=scenario, n=n, method=m.label, solver=m.solver, levels=m.levels,
-                   dt=dt, wall_per_sim_second=run.wall_per_sim_second,
-                   status=errors.classify(run), failed=run.failed,
-                   reference_self_check=check, reference_dt=ref.dt)
+        row = {'scenario': scenario, 'n': n, 'method': m.label, 'solver': m.solver,
+               'levels': m.levels, 'dt': dt, 'wall_per_sim_second': run.wall_per_sim_second,
+               'status': errors.classify(run), 'failed': run.failed,
+               'reference_self_check': check, 'reference_dt': ref.dt}
         if run.failed:
             row.update(position_rms=np.nan, com_rms=np.nan, energy_loss_rate=np.nan,
                        max_strain=run.max_strain)
@@ -66,16 +69,19 @@ def _style(label):
         index = int(label.split('L')[-1]) - 2
     elif family == 'implicit':
         index = {'0.01': 0, '0.0001': 1}.get(label.split()[2], 2)
-    return dict(color=colours[min(index, len(colours) - 1)],
-                ls='--' if 'literal' in label else '-', marker='o', ms=4)
+    return {'color': colours[min(index, len(colours) - 1)],
+            'ls': '--' if 'literal' in label else '-', 'marker': 'o', 'ms': 4}
 
 
 def chart(rows, self_checks, plan, path, metric='position_rms',
           ylabel='RMS vertex error (m)'):
-    """One panel per scenario and size: error against wall time per simulated second,
-    a line per method through its time steps (a cross marks a run that over-stretched or
-    blew up before the end), the Pareto front of the runs that stayed sane, the
-    reference's own uncertainty and the real-time line."""
+    """
+    Draw one panel per scenario and size: error against wall time per simulated second.
+
+    Each panel has a line per method through its time steps (a cross marks a run that
+    over-stretched or blew up before the end), the Pareto front of the runs that stayed
+    sane, the reference's own uncertainty and the real-time line.
+    """
     import matplotlib
     matplotlib.use('Agg')
     import matplotlib.pyplot as plt

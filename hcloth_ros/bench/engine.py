@@ -1,4 +1,5 @@
-"""Engine benchmark: milliseconds per step of every solver at three cloth sizes.
+"""
+Engine benchmark: milliseconds per step of every solver at three cloth sizes.
 
 Run ``hcloth_engine_bench`` (or ``python -m hcloth_ros.bench.engine``). Scene: a 1 m x 1 m
 cloth pinned at its two level-0 corners ``(0, 0)`` and ``(0, cols-1)``, ``dt = 1/60``,
@@ -38,6 +39,7 @@ printed before and after. Numba's thread count and threading layer go with every
 """
 
 import argparse
+from collections import defaultdict
 import json
 import os
 import platform
@@ -45,14 +47,13 @@ import subprocess
 import sys
 import tempfile
 import time
-from collections import defaultdict
 
 import numpy as np
 
 SIZES = {
-    '8k': dict(resolution=12, levels=4),
-    '16k': dict(resolution=9, levels=5),
-    '65k': dict(resolution=9, levels=6),
+    '8k': {'resolution': 12, 'levels': 4},
+    '16k': {'resolution': 9, 'levels': 5},
+    '65k': {'resolution': 9, 'levels': 6},
 }
 DT = 1.0 / 60.0
 
@@ -103,16 +104,17 @@ def run_config(size, solver_name, steps, warmup, budget, options=None, label=Non
             break
     ms = np.asarray(times) * 1e3
     lv = model.level(model.level_count - 1)
-    result = dict(
-        size=size, solver=solver_name, label=label or solver_name,
-        options={k: v for k, v in (options or {}).items()}, resolution0=SIZES[size]['resolution'],
-        levels=model.level_count, finest=f'{lv.rows}x{lv.cols}', points=lv.rows * lv.cols,
-        simulated_levels=list(solver.levels()), warmup=warmup, steps=len(times),
-        refused=int(refused), median_ms=float(np.median(ms)),
-        p90_ms=_percentile(ms, 90), mean_ms=float(ms.mean()), min_ms=float(ms.min()),
-        steps_per_second=float(1e3 / np.median(ms)),
-        strain_sweeps_mean={k: float(np.mean(v)) for k, v in sorted(sweeps.items())},
-        wall_seconds=time.perf_counter() - t_start)
+    result = {
+        'size': size, 'solver': solver_name, 'label': label or solver_name,
+        'options': dict(options or {}), 'resolution0': SIZES[size]['resolution'],
+        'levels': model.level_count, 'finest': f'{lv.rows}x{lv.cols}',
+        'points': lv.rows * lv.cols, 'simulated_levels': list(solver.levels()),
+        'warmup': warmup, 'steps': len(times), 'refused': int(refused),
+        'median_ms': float(np.median(ms)), 'p90_ms': _percentile(ms, 90),
+        'mean_ms': float(ms.mean()), 'min_ms': float(ms.min()),
+        'steps_per_second': float(1e3 / np.median(ms)),
+        'strain_sweeps_mean': {k: float(np.mean(v)) for k, v in sorted(sweeps.items())},
+        'wall_seconds': time.perf_counter() - t_start}
     if solver_name == 'implicit':
         result.update(newton_iterations_mean=float(np.mean(newton)),
                       cg_iterations_mean=float(np.mean(cg)))
@@ -120,7 +122,8 @@ def run_config(size, solver_name, steps, warmup, budget, options=None, label=Non
 
 
 def breakdown(size, steps, warmup):
-    """Time every kernel call of the hierarchical step (per kernel and level).
+    """
+    Time every kernel call of the hierarchical step (per kernel and level).
 
     The solver's calls go through the kernel sets ``kernels.SERIAL`` and
     ``kernels.PARALLEL``, whose attributes are wrapped here with a timer for the
@@ -182,17 +185,17 @@ def breakdown(size, steps, warmup):
                 setattr(kit, n, originals[kit, n])
     rows = []
     for (name, k), values in sorted(per_step.items(), key=lambda kv: (kv[0][1], kv[0][0])):
-        entry = dict(kernel=name, level=k, median_ms=float(np.median(values) * 1e3),
-                     p90_ms=_percentile(np.asarray(values) * 1e3, 90))
+        entry = {'kernel': name, 'level': k, 'median_ms': float(np.median(values) * 1e3),
+                 'p90_ms': _percentile(np.asarray(values) * 1e3, 90)}
         if name == 'strain_limit' and sweeps.get(k):
             entry['sweeps_mean'] = float(np.mean(sweeps[k]))
             entry['ms_per_sweep'] = entry['median_ms'] / max(np.median(sweeps[k]), 1.0)
         rows.append(entry)
-    return dict(size=size, steps=len(totals), step_median_ms=float(np.median(totals) * 1e3),
-                kernels=rows)
+    return {'size': size, 'steps': len(totals),
+            'step_median_ms': float(np.median(totals) * 1e3), 'kernels': rows}
 
 
-_COLD_CHILD = r'''
+_COLD_CHILD = r"""
 import json, sys, time
 t0 = time.perf_counter()
 c0 = time.process_time()
@@ -204,23 +207,26 @@ print(json.dumps(dict(import_s=t1 - t0, warm_up_s=warm, total_s=time.perf_counte
                       process_cpu_s=time.process_time() - c0,
                       threading_layer=numba.threading_layer(),
                       threads=numba.get_num_threads())))
-'''
+"""
 
 # What a cold start compiles: the node's default (hierarchical, one thread, no
 # recording) and everything (every solver, serial and parallel builds, the energy), each
 # in one process and spread over the default number of processes.
 COLD_CONFIGS = {
-    'node default, 1 process': dict(solvers=['hierarchical'], parallel=False, energy=False,
-                                    processes=1),
-    'node default': dict(solvers=['hierarchical'], parallel=False, energy=False),
-    'every kernel, 1 process': dict(parallel=True, processes=1),
-    'every kernel': dict(parallel=True),
+    'node default, 1 process': {'solvers': ['hierarchical'], 'parallel': False,
+                                'energy': False, 'processes': 1},
+    'node default': {'solvers': ['hierarchical'], 'parallel': False, 'energy': False},
+    'every kernel, 1 process': {'parallel': True, 'processes': 1},
+    'every kernel': {'parallel': True},
 }
 
 
 def cold_start():
-    """JIT cost: warm_up() in a fresh interpreter with an empty, then a filled cache, for
-    each of :data:`COLD_CONFIGS`."""
+    """
+    Measure the JIT cost for each of :data:`COLD_CONFIGS`.
+
+    Runs warm_up() in a fresh interpreter with an empty, then a filled cache.
+    """
     root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
     out = {}
     for name, config in COLD_CONFIGS.items():
@@ -235,7 +241,7 @@ def cold_start():
                                       env=env, capture_output=True, text=True, timeout=900)
                 wall = time.perf_counter() - t0
                 if proc.returncode != 0:
-                    result = dict(error=proc.stderr.strip().splitlines()[-1:])
+                    result = {'error': proc.stderr.strip().splitlines()[-1:]}
                 else:
                     result = json.loads(proc.stdout.strip().splitlines()[-1])
                     result['process_wall_s'] = wall
@@ -243,7 +249,7 @@ def cold_start():
                 print(f'  {name:24s} {label:10s} ' + (
                     f"import {result['import_s']:.2f} s, warm_up {result['warm_up_s']:.2f} s "
                     f"(this process's cpu {result['process_cpu_s']:.1f} s), process "
-                    f"{wall:.2f} s" if 'error' not in result
+                    f'{wall:.2f} s' if 'error' not in result
                     else f"FAILED: {result['error']}"), flush=True)
     return out
 
@@ -298,11 +304,11 @@ def main(argv=None):
         if s not in SOLVERS:
             parser.error(f'unknown solver {s!r}; choose from {sorted(SOLVERS)}')
     t_all = time.perf_counter()
-    results = dict(python=sys.version.split()[0], numba=numba.__version__,
-                   numpy=np.__version__, machine=platform.machine(),
-                   processor=platform.processor(), cpu_count=os.cpu_count(),
-                   load_before=list(os.getloadavg()), dt=DT,
-                   sizes={s: dict(SIZES[s], finest_side=_side(**SIZES[s])) for s in sizes})
+    results = {'python': sys.version.split()[0], 'numba': numba.__version__,
+               'numpy': np.__version__, 'machine': platform.machine(),
+               'processor': platform.processor(), 'cpu_count': os.cpu_count(),
+               'load_before': list(os.getloadavg()), 'dt': DT,
+               'sizes': {s: dict(SIZES[s], finest_side=_side(**SIZES[s])) for s in sizes}}
     print(f'hcloth engine benchmark: dt = 1/60 s, pinned at two corners, default options; '
           f'load average {results["load_before"][0]:.2f} on {os.cpu_count()} CPUs', flush=True)
     t0 = time.perf_counter()
@@ -337,9 +343,9 @@ def main(argv=None):
     if 'hierarchical' in solver_names and sizes and not args.no_variants:
         # what the step costs besides strain limiting, and with fewer sweeps allowed
         largest = max(sizes, key=lambda s: _side(**SIZES[s]))
-        for label, options in (('hierarchical, no strain lim', dict(strain_limit=None)),
+        for label, options in (('hierarchical, no strain lim', {'strain_limit': None}),
                                ('hierarchical, 100 refine sw.',
-                                dict(strain_refine_iterations=100))):
+                                {'strain_refine_iterations': 100})):
             r = run_config(largest, 'hierarchical', args.steps, args.warmup, args.budget,
                            options, label)
             r['threads'] = numba.get_num_threads()

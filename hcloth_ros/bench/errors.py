@@ -1,4 +1,5 @@
-"""How far a run is from its reference, and whether it stayed sane.
+"""
+How far a run is from its reference, and whether it stayed sane.
 
 All take :class:`~hcloth_ros.bench.scenarios.Run` objects sampled at the same instants; a
 run that stopped early is compared over the samples it has.
@@ -34,7 +35,8 @@ def com_rms(run, ref):
 
 
 def excess_energy_loss_rate(run, ref):
-    """Energy the run lost beyond what the reference lost, per simulated second (W).
+    """
+    Energy the run lost beyond what the reference lost, per simulated second (W).
 
     The artificial damping of a method: 0 for a perfect integrator, positive when it
     dissipates (implicit Euler, filtered steps), negative when it gains energy.
@@ -48,14 +50,17 @@ def excess_energy_loss_rate(run, ref):
 
 def compare(run, ref):
     """Every error figure of ``run`` against ``ref`` in one dict."""
-    return dict(position_rms=position_rms(run, ref), com_rms=com_rms(run, ref),
-                energy_loss_rate=excess_energy_loss_rate(run, ref),
-                max_strain=float(run.max_strain))
+    return {'position_rms': position_rms(run, ref), 'com_rms': com_rms(run, ref),
+            'energy_loss_rate': excess_energy_loss_rate(run, ref),
+            'max_strain': float(run.max_strain)}
 
 
 def classify(run, mass=0.2, size=1.0, g=9.81, strain_bound=STRAIN_BOUND):
-    """``STABLE``, ``BLOWN_UP`` (refused step, non-finite values or energy running away)
-    or ``OVERSTRETCHED`` (largest strain beyond ``strain_bound``).
+    """
+    Classify a run as ``STABLE``, ``BLOWN_UP`` or ``OVERSTRETCHED``.
+
+    ``BLOWN_UP``: a refused step, non-finite values or energy running away;
+    ``OVERSTRETCHED``: largest strain beyond ``strain_bound``.
 
     Energy may rise by the work of a driven grasp and by strain limiting (a cloth held at
     10 % stretch stores about 10 J), so the runaway threshold is generous:
@@ -71,7 +76,7 @@ def classify(run, mass=0.2, size=1.0, g=9.81, strain_bound=STRAIN_BOUND):
 
 
 def pareto_front(costs, errors):
-    """Indices of the runs no other run beats on both cost and error, by cost."""
+    """Return the indices of the runs no other run beats on both cost and error, by cost."""
     order = np.lexsort((np.asarray(errors), np.asarray(costs)))
     front, best = [], np.inf
     for i in order:

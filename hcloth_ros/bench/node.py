@@ -1,4 +1,5 @@
-"""Node benchmark: sim_node and a subscriber in separate processes, per-tick breakdown.
+"""
+Node benchmark: sim_node and a subscriber in separate processes, per-tick breakdown.
 
     python -m hcloth_ros.bench.node [--sizes 16k,65k] [--seconds 10] [--rate 60]
 
@@ -21,7 +22,7 @@ import time
 
 SIZES = {'16k': 5, '65k': 6}
 
-SUBSCRIBER = '''
+SUBSCRIBER = """
 import sys, time, rclpy
 from rclpy.qos import qos_profile_sensor_data
 from sensor_msgs.msg import PointCloud2
@@ -35,7 +36,7 @@ while time.monotonic() < end:
     rclpy.spin_once(node, timeout_sec=0.05)
 span = got[-1] - got[0] if len(got) > 1 else 0.0
 print(f'received {len(got)} {(len(got) - 1) / span if span else 0.0:.2f}')
-'''
+"""
 
 
 def run(levels, seconds, rate, record):

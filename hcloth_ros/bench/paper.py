@@ -1,36 +1,42 @@
-"""The paper's figures, reproduced: Fig. 3/5 (hierarchical against single-level approximate
-and the coarse mesh alone), Fig. 6 (wrinkles from contraction resistance) and Fig. 4 (the
-8192-point cloth in real time)."""
+"""
+The paper's figures, reproduced: Fig. 3/5, Fig. 6 and Fig. 4.
+
+Fig. 3/5: hierarchical against single-level approximate and the coarse mesh alone;
+Fig. 6: wrinkles from contraction resistance; Fig. 4: the 8192-point cloth in real time.
+"""
 
 import time
 
-import numba
-import numpy as np
-
 from hcloth_ros.bench.reference import reference_dt
 from hcloth_ros.bench.scenarios import build_model, simulate
-from hcloth_ros.core import ClothBuilder, Control, Placement, State, make_solver
+from hcloth_ros.core import ClothBuilder, Control, make_solver, Placement, State
 from hcloth_ros.core.metrics import mean_curvature, wrinkliness
+import numba
+import numpy as np
 
 SNAPSHOTS = (0.25, 0.5, 1.0, 2.0)
 
 
 def fig3_runs(plan, progress):
-    """The swinging cloth of 9 x 9 level 0 and ``plan.paper_levels`` levels, with the
+    """
+    Run the swinging cloth in each case of Fig. 3/5; return ``(n, runs)``.
+
+    The cloth has 9 x 9 level 0 and ``plan.paper_levels`` levels. The cases, with the
     paper's literal gravity: (a) hierarchical, (b) the coarse mesh alone, (c) the fine
-    mesh with single-level eq. 6; plus our default (exact gravity) and the reference."""
+    mesh with single-level eq. 6; plus our default (exact gravity) and the reference.
+    """
     levels = plan.paper_levels
     n = 8 * 2 ** (levels - 1) + 1
     seconds = plan.paper_seconds
     cases = [
         ('(a) hierarchical, literal (paper)', 'hierarchical', n, levels,
-         dict(external='literal'), 1 / 60),
-        ('(b) coarse mesh alone, approx literal', 'approx', 9, 1, dict(external='literal'),
+         {'external': 'literal'}, 1 / 60),
+        ('(b) coarse mesh alone, approx literal', 'approx', 9, 1, {'external': 'literal'},
          1 / 60),
         ('(c) fine mesh, approx literal (one level)', 'approx', n, 1,
-         dict(external='literal'), 1 / 60),
+         {'external': 'literal'}, 1 / 60),
         ('hierarchical, exact gravity (our default)', 'hierarchical', n, levels, {}, 1 / 60),
-        ('reference (explicit, small step)', 'explicit', n, 1, dict(strain_limit=None),
+        ('reference (explicit, small step)', 'explicit', n, 1, {'strain_limit': None},
          reference_dt(n)),
     ]
     runs = {}
@@ -68,8 +74,8 @@ def chart_fig3(n, runs, path):
     ax = fig.add_subplot(grid[:half, len(instants):])
     log = fig.add_subplot(grid[half:, len(instants):])
     for label, run in runs.items():
-        style = dict(lw=2.5 if label.startswith('reference') else 1.4,
-                     color='k' if label.startswith('reference') else None)
+        style = {'lw': 2.5 if label.startswith('reference') else 1.4,
+                 'color': 'k' if label.startswith('reference') else None}
         ax.plot(run.times, run.com[:, 2], label=label, **style)
         # the literal runs barely move: their drop only shows on a log scale
         log.plot(run.times[1:], 1.5 - run.com[1:, 2], **style)
@@ -87,8 +93,12 @@ def chart_fig3(n, runs, path):
 
 
 def fig6_runs(plan, progress):
-    """Contraction resistance all 1 against 0.5 on the coarse levels (paper: (1, 1, 1, 1)
-    against (0.5, 0.5, 1, 1)), hierarchical default on the swinging cloth."""
+    """
+    Run Fig. 6: contraction resistance all 1 against 0.5 on the coarse levels.
+
+    The paper compares (1, 1, 1, 1) against (0.5, 0.5, 1, 1). Hierarchical default on the
+    swinging cloth.
+    """
     levels = plan.paper_levels
     n = 8 * 2 ** (levels - 1) + 1
     stiff = [1.0] * levels
@@ -102,14 +112,18 @@ def fig6_runs(plan, progress):
         model = build_model(n, levels, contraction=values)
         state = State.at_rest(model)
         state.q[-1][:] = run.points[-1].T.reshape(3, n, n)
-        out[label] = dict(run=run, wrinkle=wrinkliness(model, state, levels - 1),
-                          curvature=mean_curvature(model, state, levels - 1))
+        out[label] = {'run': run, 'wrinkle': wrinkliness(model, state, levels - 1),
+                      'curvature': mean_curvature(model, state, levels - 1)}
     return n, out
 
 
 def chart_fig6(n, results, path):
-    """The final cloths seen from the front, each face coloured by the mean curvature
-    ``|H|`` of its corner (the quantity the wrinkle measure averages), one colour scale."""
+    """
+    Draw the final cloths seen from the front, on one colour scale.
+
+    Each face is coloured by the mean curvature ``|H|`` of its corner (the quantity the
+    wrinkle measure averages).
+    """
     import matplotlib
     matplotlib.use('Agg')
     import matplotlib.pyplot as plt
@@ -134,8 +148,11 @@ def chart_fig6(n, results, path):
 
 
 def fig4_timing(progress, seconds=1.0, dt=1 / 60):
-    """Median step of the default solver on the two grids nearest the paper's 8192
-    points (89 x 89 = 7921 and 65 x 129 = 8385), one and two threads."""
+    """
+    Time the median step of the default solver on the grids nearest the paper's 8192 points.
+
+    The two grids are 89 x 89 = 7921 and 65 x 129 = 8385 points; one and two threads.
+    """
     rows = []
     for resolution, levels in (((12, 12), 4), ((9, 17), 4)):
         model = ClothBuilder(resolution=resolution, level_count=levels,
@@ -153,9 +170,9 @@ def fig4_timing(progress, seconds=1.0, dt=1 / 60):
                 start = time.perf_counter()
                 solver.step(state, control, dt)
                 times.append(time.perf_counter() - start)
-            rows.append(dict(points=top.rows * top.cols, grid=f'{top.cols} x {top.rows}',
-                             threads=threads, median_ms=1e3 * float(np.median(times)),
-                             p90_ms=1e3 * float(np.percentile(times, 90)),
-                             real_time_factor=dt / float(np.median(times))))
+            rows.append({'points': top.rows * top.cols, 'grid': f'{top.cols} x {top.rows}',
+                         'threads': threads, 'median_ms': 1e3 * float(np.median(times)),
+                         'p90_ms': 1e3 * float(np.percentile(times, 90)),
+                         'real_time_factor': dt / float(np.median(times))})
     numba.set_num_threads(1)
     return rows

@@ -1,4 +1,5 @@
-"""Our benchmark scene run in peer simulators (MuJoCo, PyBullet), for cost and plausibility.
+"""
+Our benchmark scene run in peer simulators (MuJoCo, PyBullet), for cost and plausibility.
 
 The scene is the one our engine benchmarks: a 1 m x 1 m cloth of 0.2 kg on an n x n grid,
 horizontal at z = 1.5 m, point ``(i, j)`` at ``x = -0.5 + i/(n-1)``, ``y = j/(n-1)``;
@@ -67,16 +68,22 @@ def pinned_indices(n):
 
 
 def lumped_masses(n):
-    """Area-lumped point masses (kg) as in our engine: corners a quarter and edge points
-    half of an interior point, summing to TOTAL_MASS. Shape ``(n*n,)``."""
+    """
+    Area-lumped point masses (kg) as in our engine, shape ``(n*n,)``.
+
+    Corners a quarter and edge points half of an interior point, summing to TOTAL_MASS.
+    """
     w = np.ones(n)
     w[[0, -1]] = 0.5
     return (TOTAL_MASS * np.outer(w, w) / (n - 1) ** 2).ravel()
 
 
 def structural_edges(n):
-    """Index pairs of the structural edges (grid neighbours), shape ``(2n(n-1), 2)``;
-    their rest length is ``SIZE / (n-1)``."""
+    """
+    Index pairs of the structural edges (grid neighbours), shape ``(2n(n-1), 2)``.
+
+    Their rest length is ``SIZE / (n-1)``.
+    """
     idx = np.arange(n * n).reshape(n, n)
     along_x = np.stack([idx[:-1, :].ravel(), idx[1:, :].ravel()], axis=1)
     along_y = np.stack([idx[:, :-1].ravel(), idx[:, 1:].ravel()], axis=1)
@@ -84,8 +91,12 @@ def structural_edges(n):
 
 
 def sample_steps(dt, duration, sample_every):
-    """Step counts at which to sample: the step nearest to every multiple of
-    ``sample_every`` from 0 to ``duration`` inclusive, without repeats."""
+    """
+    Step counts at which to sample, without repeats.
+
+    The step nearest to every multiple of ``sample_every`` from 0 to ``duration``
+    inclusive.
+    """
     count = int(math.floor(duration / sample_every + 1e-9))
     wanted = [k * sample_every for k in range(count + 1)]
     if duration - wanted[-1] > 1e-9:
@@ -95,9 +106,12 @@ def sample_steps(dt, duration, sample_every):
 
 
 def grid_order(points, n, tol=1e-6):
-    """Permutation ``p`` with ``points[p]`` in our grid order, found from the engine's
-    initial vertex positions, so that no engine's internal numbering is assumed.
-    Raises RuntimeError if the points are not our grid."""
+    """
+    Permutation ``p`` with ``points[p]`` in our grid order.
+
+    Found from the engine's initial vertex positions, so that no engine's internal
+    numbering is assumed. Raises RuntimeError if the points are not our grid.
+    """
     h = SIZE / (n - 1)
     i = np.rint((points[:, 0] + SIZE / 2) / h).astype(int)
     j = np.rint(points[:, 1] / h).astype(int)
@@ -116,7 +130,8 @@ def grid_order(points, n, tol=1e-6):
 
 @contextlib.contextmanager
 def _silenced_output():
-    """Send file descriptors 1 and 2 to /dev/null for the duration.
+    """
+    Send file descriptors 1 and 2 to /dev/null for the duration.
 
     PyBullet prints a banner from C at import, which would otherwise land in the
     benchmark's output. C's buffers are flushed before the descriptors are restored so
@@ -155,7 +170,8 @@ def _version(name):
 
 
 def _simulate(step, positions, n, dt, duration, sample_every):
-    """Step a built scene for ``duration`` and sample it.
+    """
+    Step a built scene for ``duration`` and sample it.
 
     ``step()`` advances the engine by dt; ``positions()`` returns the current points in
     our grid order. Only the ``step()`` calls are timed. Stops early once a sample is not
@@ -208,8 +224,10 @@ def _simulate(step, positions, n, dt, duration, sample_every):
 # --- MuJoCo --------------------------------------------------------------------------------
 
 def spring_grid_moduli(k_struct=K_STRUCT, k_shear=K_SHEAR, k_bend=K_BEND):
-    """In-plane elastic constants (N/m) of our spring grid, ``(C11, C12, G)``, with the
-    energy per unit area under a uniform small strain (ex, ey, exy)
+    """
+    In-plane elastic constants (N/m) of our spring grid, ``(C11, C12, G)``.
+
+    The energy per unit area under a uniform small strain (ex, ey, exy) is
     ``W = C11/2 (ex^2 + ey^2) + C12 ex ey + 2 G exy^2``.
 
     Per cell of area h^2 there are, per axis, one structural spring (length h) and one
@@ -224,9 +242,11 @@ def spring_grid_moduli(k_struct=K_STRUCT, k_shear=K_SHEAR, k_bend=K_BEND):
 
 
 def mujoco_membrane(thickness=MUJOCO_THICKNESS):
-    """Young's modulus (Pa) and Poisson's ratio of MuJoCo's 2D flex that best copy our
-    spring grid in plane: its stretch stiffness along the grid axes and its lateral
-    contraction exactly, its shear to 70 %.
+    """
+    Young's modulus (Pa) and Poisson's ratio of MuJoCo's 2D flex that best copy our grid.
+
+    The flex copies our spring grid in plane: its stretch stiffness along the grid axes and
+    its lateral contraction exactly, its shear to 70 %.
 
     MuJoCo 3.14 offers no edge springs on 2D flexes ("edge stiffness only available for
     dim=1"), only a continuum shell. Probing its membrane (affine strains of a flat flex,
@@ -254,7 +274,8 @@ def mujoco_membrane(thickness=MUJOCO_THICKNESS):
 
 
 def _mujoco_xml(n, dt):
-    """MJCF of the scene: one flexcomp grid, pinned corners, no contact.
+    """
+    MJCF of the scene: one flexcomp grid, pinned corners, no contact.
 
     The ``discrete`` integrator is the one MuJoCo 3.14 requires for implicit flex
     elasticity (under ``implicit``/``implicitfast`` it refuses: "flex elasticity is no
@@ -285,15 +306,20 @@ def _mujoco_xml(n, dt):
 
 
 def _mujoco_vertex_positions(mujoco, m, d):
-    """Flex vertex positions of the current qpos. After mj_step the stored positions are
-    those at the start of the step, so recompute kinematics (outside the timed loop)."""
+    """
+    Flex vertex positions of the current qpos.
+
+    After mj_step the stored positions are those at the start of the step, so recompute
+    kinematics (outside the timed loop).
+    """
     mujoco.mj_kinematics(m, d)
     mujoco.mj_flex(m, d)
     return d.flexvert_xpos
 
 
 def _mujoco_scene(mujoco, n, dt):
-    """Compiled model and data at t = 0, plus the vertex order (see grid_order).
+    """
+    Compiled model and data at t = 0, plus the vertex order (see grid_order).
 
     flexcomp gives every body the same mass; we overwrite the free bodies' masses with
     our area-lumped ones so the scene's mass matches ours exactly (pinned corners sit on
@@ -314,7 +340,7 @@ def _mujoco_scene(mujoco, n, dt):
 
 
 def run_mujoco(n, dt, duration=2.0, sample_every=1 / 30):
-    """The scene in MuJoCo (flexcomp shell, discrete integrator); see run()."""
+    """Run the scene in MuJoCo (flexcomp shell, discrete integrator); see run()."""
     mujoco = _import('mujoco')
     warnings = []
     previous = mujoco.get_mju_user_warning()
@@ -346,7 +372,8 @@ def run_mujoco(n, dt, duration=2.0, sample_every=1 / 30):
 # --- PyBullet ------------------------------------------------------------------------------
 
 def _pybullet_obj(n, path):
-    """Write the grid as an .obj whose every cell holds both of its triangulations.
+    """
+    Write the grid as an .obj whose every cell holds both of its triangulations.
 
     Bullet makes one spring per mesh edge; both diagonals in the mesh give every cell our
     two shear springs (the overlapping faces only matter for contact, which is off).
@@ -362,7 +389,8 @@ def _pybullet_obj(n, path):
 
 
 def _pybullet_scene(p, n, dt):
-    """A fresh DIRECT client with the scene built; returns (client, body, order).
+    """
+    Build the scene in a fresh DIRECT client; return (client, body, order).
 
     Deformable world, mass-spring model: ``springElasticStiffness`` on every mesh edge
     (our structural and shear springs), ``springBendingStiffness`` on Bullet's bending
@@ -401,7 +429,7 @@ def _pybullet_positions(p, client, body):
 
 
 def run_pybullet(n, dt, duration=2.0, sample_every=1 / 30):
-    """The scene in PyBullet (deformable world, mass-spring); see run()."""
+    """Run the scene in PyBullet (deformable world, mass-spring); see run()."""
     p = _import('pybullet')
     # Warm-up: one step of a throwaway copy of the scene in its own client, not timed.
     client, _, _ = _pybullet_scene(p, n, dt)
@@ -432,8 +460,7 @@ PEERS = {'mujoco': run_mujoco, 'pybullet': run_pybullet}
 
 
 def available():
-    """Names of the peers whose Python package imports here (others are skipped, not
-    errors)."""
+    """Names of the peers whose Python package imports here (others are skipped, not errors)."""
     names = []
     for name in PEERS:
         try:
@@ -445,7 +472,8 @@ def available():
 
 
 def run(name, n, dt, duration=2.0, sample_every=1 / 30):
-    """Run the scene once in peer ``name`` at time step ``dt`` (s).
+    """
+    Run the scene once in peer ``name`` at time step ``dt`` (s).
 
     Returns a dict with: ``peer``, ``version``, ``n``, ``dt``, ``duration``, ``steps``,
     ``material`` (the material mapping used), ``mass_distribution``, ``threads``,
@@ -473,7 +501,8 @@ def run(name, n, dt, duration=2.0, sample_every=1 / 30):
 def largest_plausible_step(name, n, dts=(1 / 30, 1 / 60, 1 / 120, 1 / 240, 1 / 480, 1 / 960,
                                          1 / 1920),
                            strain_bound=0.2, duration=2.0, on_run=None):
-    """The largest time step at which the peer's run is plausible.
+    """
+    Find the largest time step at which the peer's run is plausible.
 
     Tries ``dts`` from largest to smallest and returns the result (as from run) of the
     first run that is finite with ``max_strain <= strain_bound``, with ``plausible``

@@ -1,4 +1,5 @@
-"""What a benchmark run covers: the methods, their settings and the three presets.
+"""
+What a benchmark run covers: the methods, their settings and the three presets.
 
 ``full`` is what the README's charts come from; ``quick`` finishes in a few minutes on 2
 cores; ``tiny`` is the seconds-long smoke run of the test suite.
@@ -77,7 +78,7 @@ def accuracy_methods(plan, n):
 
 
 def stability_methods(plan):
-    """The solvers mapped over time step and stiffness (``n = plan.stability_n``)."""
+    """List the solvers mapped over time step and stiffness (``n = plan.stability_n``)."""
     levels = 3 if plan.stability_n >= 9 else 2
     return [
         Method('explicit', 'explicit', (('strain_limit', None),)),

@@ -1,4 +1,5 @@
-"""Markdown tables of a benchmark's ``results.json`` (the README's tables come from here).
+"""
+Markdown tables of a benchmark's ``results.json`` (the README's tables come from here).
 
     python -m hcloth_ros.bench.report doc/bench/results.json > doc/bench/summary.md
 """
@@ -18,18 +19,21 @@ def _dt(dt):
 def accuracy_table(results, dt=1 / 60):
     """Every method at one time step (explicit at its most accurate stable step)."""
     rows = results.get('accuracy', [])
-    out = ['| scenario | finest | method | dt (s) | status | vertex RMS (m) | centre of mass RMS (m) '
+    out = ['| scenario | finest | method | dt (s) | status | vertex RMS (m) '
+           '| centre of mass RMS (m) '
            '| energy lost beyond reference (W) | largest strain | wall s per simulated s |',
            '| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |']
     for r in rows:
         chosen = abs(r['dt'] - dt) < 1e-9
         if r['solver'] == 'explicit':
-            stable = [x for x in rows if x['method'] == 'explicit' and x['scenario'] == r['scenario']
+            stable = [x for x in rows
+                      if x['method'] == 'explicit' and x['scenario'] == r['scenario']
                       and x['n'] == r['n'] and x['position_rms'] is not None]
             chosen = bool(stable) and r is max(stable, key=lambda x: x['dt'])
         if not chosen:
             continue
-        out.append(f'| {r["scenario"]} | {r["n"]} | {r["method"]} | {_dt(r["dt"])} | {r["status"]} '
+        out.append(f'| {r["scenario"]} | {r["n"]} | {r["method"]} | {_dt(r["dt"])} '
+                   f'| {r["status"]} '
                    f'| {_fmt(r["position_rms"])} | {_fmt(r["com_rms"])} '
                    f'| {_fmt(r["energy_loss_rate"])} | {_fmt(r["max_strain"])} '
                    f'| {_fmt(r["wall_per_sim_second"])} |')
@@ -57,7 +61,7 @@ def violent_table(results):
     motions = list(dict.fromkeys(r['motion'] for r in rows))
     methods = list(dict.fromkeys(r['method'] for r in rows))
     out = ['| method | ' + ' | '.join(f'{m} ({next(r["what"] for r in rows if r["motion"] == m)})'
-                                     for m in motions) + ' |',
+                                      for m in motions) + ' |',
            '| --- |' + ' --- |' * len(motions)]
     for method in methods:
         cells = []
@@ -71,7 +75,8 @@ def violent_table(results):
 
 def peers_table(results):
     out = ['| simulator | finest | largest plausible dt | plausible | wall s per simulated s '
-           '| cost vs hcloth default | largest strain | centre-of-mass height RMS vs reference (m) |',
+           '| cost vs hcloth default | largest strain '
+           '| centre-of-mass height RMS vs reference (m) |',
            '| --- | --- | --- | --- | --- | --- | --- | --- |']
     for r in results.get('peers', []):
         name = f'{r["simulator"]} {r["version"]}'.strip()

@@ -1,4 +1,5 @@
-"""The benchmark's scenes and the one loop that runs a solver through them.
+"""
+The benchmark's scenes and the one loop that runs a solver through them.
 
 Every scenario is a 1 m x 1 m, 0.2 kg cloth released at rest from horizontal at 1.5 m,
 with no obstacles (contact is not what is measured here):
@@ -16,10 +17,9 @@ mesh and the same reference.
 from dataclasses import dataclass
 import time
 
-import numpy as np
-
-from hcloth_ros.core import ClothBuilder, Control, Placement, State, make_solver
+from hcloth_ros.core import ClothBuilder, Control, make_solver, Placement, State
 from hcloth_ros.core.metrics import centre_of_mass, energy
+import numpy as np
 
 SCENARIOS = ('swing', 'free_fall', 'grasp')
 SAMPLE_EVERY = 1 / 30      # s between samples; every time step used divides it
@@ -45,8 +45,11 @@ def fits(n, levels):
 
 
 def build_model(n, levels=1, k=1000.0, contraction=None):
-    """The benchmark cloth: finest ``n x n``; structural and shear springs ``k``, bending
-    ``k / 10`` (N/m, the default scene's ratio)."""
+    """
+    Build the benchmark cloth, finest ``n x n``.
+
+    Structural and shear springs ``k``, bending ``k / 10`` (N/m, the default scene's ratio).
+    """
     n0 = level0_side(n, levels)
     return ClothBuilder(width=1.0, height=1.0, resolution=(n0, n0), level_count=levels,
                         total_mass=0.2, k_struct=k, k_shear=k, k_bend=k / 10,
@@ -126,7 +129,7 @@ class Run:
 
 
 def samples_per(dt, duration):
-    """(steps, steps between samples) for a step dt that divides SAMPLE_EVERY."""
+    """Return (steps, steps between samples) for a step dt that divides SAMPLE_EVERY."""
     every = SAMPLE_EVERY / dt
     if abs(every - round(every)) > 1e-6 or round(every) < 1:
         raise ValueError(f'dt = {dt} must divide the sample interval {SAMPLE_EVERY:.5f} s')
@@ -173,7 +176,7 @@ def simulate(scenario, solver_name, n, levels, dt, duration, k=1000.0, options=N
 
 
 def closed_form_free_fall(n, duration, g=9.81):
-    """The exact free fall: every point falls g t^2 / 2 and the cloth keeps its shape."""
+    """Return the exact free fall: every point falls g t^2 / 2 and the cloth keeps its shape."""
     model = build_model(n, 1)
     rest = State.at_rest(model).points(0)
     steps, _ = samples_per(SAMPLE_EVERY, duration)

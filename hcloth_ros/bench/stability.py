@@ -1,12 +1,15 @@
-"""Where each method fails: stability maps over time step and stiffness, and violent
-grasps (a grasp that jumps, one that moves fast)."""
+"""
+Where each method fails: stability maps and violent grasps.
 
-import numpy as np
+Stability maps over time step and stiffness, and violent grasps (a grasp that jumps, one
+that moves fast).
+"""
 
 from hcloth_ros.bench import errors
 from hcloth_ros.bench.plan import Method, stability_methods
-from hcloth_ros.bench.scenarios import VIOLENT, VIOLENT_TEXT, build_model, simulate
+from hcloth_ros.bench.scenarios import build_model, simulate, VIOLENT, VIOLENT_TEXT
 from hcloth_ros.core.metrics import explicit_step_limit
+import numpy as np
 
 CLASSES = (errors.STABLE, errors.OVERSTRETCHED, errors.BLOWN_UP)
 COLOURS = {errors.STABLE: '#4caf50', errors.OVERSTRETCHED: '#ffb300',
@@ -22,26 +25,32 @@ def map_jobs(plan):
 
 
 def stability_map(plan, progress):
-    """One row per (method, stiffness, dt) on the swinging cloth; plus the theoretical
-    explicit step limit per stiffness."""
+    """
+    Map every method on the swinging cloth: one row per (method, stiffness, dt).
+
+    Also returns the theoretical explicit step limit per stiffness.
+    """
     rows = []
     for m, k, dt in map_jobs(plan):
         progress(f'stability {m.label} k={k:g} dt=1/{1 / dt:.0f}')
         run = simulate('swing', m.solver, plan.stability_n, m.levels, dt,
                        plan.stability_duration, k=k, options=m.kwargs)
-        rows.append(dict(method=m.label, k=k, dt=dt, status=errors.classify(run),
-                         max_strain=run.max_strain, failed=run.failed))
+        rows.append({'method': m.label, 'k': k, 'dt': dt, 'status': errors.classify(run),
+                     'max_strain': run.max_strain, 'failed': run.failed})
     limits = {k: explicit_step_limit(build_model(plan.stability_n, 1, k), 0)
               for k in plan.stiffnesses}
     return rows, limits
 
 
 def explicit_boundary_check(rows, limits):
-    """Per stiffness: the largest explicit dt that did not blow up, the smallest that did,
-    and the
-    theoretical limit 2 / w_max; ``consistent`` when the limit lies between them (the
-    measured boundary agrees with theory up to the ladder's factor of 2), None when the
-    ladder does not reach both sides."""
+    """
+    Check the explicit stability boundary against theory, per stiffness.
+
+    Per stiffness: the largest explicit dt that did not blow up, the smallest that did,
+    and the theoretical limit 2 / w_max; ``consistent`` when the limit lies between them
+    (the measured boundary agrees with theory up to the ladder's factor of 2), None when
+    the ladder does not reach both sides.
+    """
     out = []
     for k, limit in limits.items():
         ex = [r for r in rows if r['method'] == 'explicit' and r['k'] == k]
@@ -54,8 +63,8 @@ def explicit_boundary_check(rows, limits):
         # bracketed only when the ladder has runs on both sides of the boundary
         consistent = (bool(lo <= limit * 1.0001 and hi >= limit * 0.9999)
                       if stable and unstable else None)
-        out.append(dict(k=k, theory=limit, largest_stable=lo, smallest_blown_up=hi,
-                        consistent=consistent))
+        out.append({'k': k, 'theory': limit, 'largest_stable': lo, 'smallest_blown_up': hi,
+                    'consistent': consistent})
     return out
 
 
@@ -110,19 +119,23 @@ def violent_methods(n):
                    dts=(1 / 60,)),
             Method(f'hierarchical literal L{levels}', 'hierarchical', (('external', 'literal'),),
                    levels, dts=(1 / 60,)),
-            Method('implicit tol 1e-3 m', 'implicit', (('tolerance', 1e-3), ('strain_limit', None)),
-                   dts=(1 / 60,))]
+            Method('implicit tol 1e-3 m', 'implicit',
+                   (('tolerance', 1e-3), ('strain_limit', None)), dts=(1 / 60,))]
 
 
 def violent_control(n, progress, duration=0.6):
-    """Each method against each violent grasp motion of the two corners (dt = 1/60 s;
-    explicit at 1/1920 s, a step it is stable at here): status and largest strain."""
+    """
+    Run each method against each violent grasp motion of the two corners.
+
+    At dt = 1/60 s; explicit at 1/1920 s, a step it is stable at here. Each row holds the
+    status and largest strain.
+    """
     rows = []
     for motion in VIOLENT:
         for m in violent_methods(n):
             progress(f'violent {motion}: {m.label}')
             run = simulate(motion, m.solver, n, m.levels, m.dts[0], duration, options=m.kwargs)
-            rows.append(dict(motion=motion, what=VIOLENT_TEXT[motion], method=m.label,
-                             dt=m.dts[0], status=errors.classify(run),
-                             max_strain=run.max_strain, failed=run.failed))
+            rows.append({'motion': motion, 'what': VIOLENT_TEXT[motion], 'method': m.label,
+                         'dt': m.dts[0], 'status': errors.classify(run),
+                         'max_strain': run.max_strain, 'failed': run.failed})
     return rows

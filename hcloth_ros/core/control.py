@@ -1,4 +1,5 @@
-"""What the outside world sets: pinned points, grasps and kinematic targets.
+"""
+What the outside world sets: pinned points, grasps and kinematic targets.
 
 Everything is given in point ids of the finest level (see :mod:`hcloth_ros.core.model`).
 A hold is made consistent across levels here, so a coarse level never drags a held fine
@@ -20,9 +21,9 @@ Pins win over grasps for a point that is both.
 
 from dataclasses import dataclass
 
+# the hold kinds are the kernels' (re-exported here for the engine's users)
+from hcloth_ros.core.kernels.layout import DRIVEN, FREE, PINNED  # noqa: F401
 import numpy as np
-
-from hcloth_ros.core.kernels.layout import DRIVEN, FREE, PINNED  # noqa: F401 (re-exported)
 
 
 @dataclass
@@ -35,7 +36,8 @@ class _Grasp:
 
 @dataclass
 class Holds:
-    """One level's resolved holds, as the kernels read them.
+    """
+    One level's resolved holds, as the kernels read them.
 
     ``kind``: int8 ``(rows, cols)`` of FREE / PINNED / DRIVEN. ``drive_index``: flat grid
     indices of driven points. ``drive_target``: ``(3, m)`` positions they must reach at
@@ -126,7 +128,8 @@ class Control:
         return list(self._grasps)
 
     def grasp(self, name, ids, state, rotation=np.eye(3), translation=(0, 0, 0)):
-        """Attach ``ids`` rigidly to a frame whose pose is ``(rotation, translation)`` now.
+        """
+        Attach ``ids`` rigidly to a frame whose pose is ``(rotation, translation)`` now.
 
         Re-grasping an existing name replaces it.
         """
@@ -156,7 +159,8 @@ class Control:
         g.rotation, g.translation = rotation, translation
 
     def recapture(self, state, k):
-        """Re-take every grasp's frame coordinates on level k from its current state.
+        """
+        Re-take every grasp's frame coordinates on level k from its current state.
 
         A level that was not simulated when a grasp closed holds stale coordinates; after
         it is restarted from the coarser state (``prolong_state``) this keeps its grasped

@@ -1,9 +1,8 @@
 """Quantities the tests, benchmarks and recordings report about a cloth level."""
 
-import numpy as np
-
 from hcloth_ros.core import kernels
 from hcloth_ros.core.model import STENCIL_DC, STENCIL_DR
+import numpy as np
 
 
 def centre_of_mass(model, state, k):
@@ -31,7 +30,8 @@ def strain(model, state, k):
 
 
 def wrinkliness(model, state, k):
-    """Mean absolute mean curvature of level k's interior (1/m): the wrinkle measure.
+    """
+    Mean absolute mean curvature of level k's interior (1/m): the wrinkle measure.
 
     A flat sheet scores 0, a sheet bent on a large radius R about ``1/(2R)``, and folds
     and wrinkles at the grid scale score far more, so comparing two runs on the same mesh
@@ -42,7 +42,8 @@ def wrinkliness(model, state, k):
 
 
 def mean_curvature(model, state, k):
-    """``|H|`` at each interior grid point of level k (1/m), shape ``(rows-2, cols-2)``.
+    """
+    ``|H|`` at each interior grid point of level k (1/m), shape ``(rows-2, cols-2)``.
 
     The discrete Laplacian of position (second differences over the rest spacings ``du``,
     ``dv``) projected on the surface normal; half its magnitude is the mean curvature.
@@ -60,8 +61,11 @@ def mean_curvature(model, state, k):
 
 
 def explicit_step_limit(model, k):
-    """2 / sqrt(largest eigenvalue of M^-1 K) of level k at rest (s): the largest stable
-    step of symplectic Euler (dense eigenvalues: O(n^3), meant for up to ~1000 points).
+    """
+    Return the largest stable step of symplectic Euler on level k at rest (s).
+
+    That is 2 / sqrt(largest eigenvalue of M^-1 K), from dense eigenvalues: O(n^3), meant
+    for up to ~1000 points.
 
     Symplectic Euler on a linear oscillator of frequency w is stable iff h w < 2; at rest
     each spring contributes k u u^T to the stiffness matrix (no transverse term).
@@ -89,7 +93,8 @@ def explicit_step_limit(model, k):
 
 
 def explicit_step_bound(model, k):
-    """A cheap lower bound on :func:`explicit_step_limit` (s), for any mesh size.
+    """
+    Return a cheap lower bound on :func:`explicit_step_limit` (s), for any mesh size.
 
     Gershgorin: every eigenvalue of M^-1 K is at most max_i 2 K_i / m_i, since row i of K
     holds K_i on the diagonal and springs summing to K_i off it.

@@ -1,7 +1,8 @@
-"""The immutable cloth model: a hierarchy of regular grids over one rectangle.
+r"""
+The immutable cloth model: a hierarchy of regular grids over one rectangle.
 
 Level 0 is the coarse grid. Level k inserts a point on every edge of level k-1 (the
-structural edges and one diagonal per quad, the "\\" one from (r, c) to (r+1, c+1)), so
+structural edges and one diagonal per quad, the "\" one from (r, c) to (r+1, c+1)), so
 a side of level k has ``2**k * (n0 - 1) + 1`` points.
 
 Two numberings of the same points exist:
@@ -19,18 +20,19 @@ Units are SI: metres, kilograms, newtons per metre.
 
 from dataclasses import dataclass, field
 
+# The 12-spring stencil of every grid point (row and column offsets, in pairs of opposite
+# directions) is the kernels' (re-exported here); its spring kinds are below.
+from hcloth_ros.core.kernels.layout import STENCIL_DC, STENCIL_DR, STENCIL_SIZE  # noqa: F401
 import numpy as np
 
-# The 12-spring stencil of every grid point (row and column offsets, in pairs of opposite
-# directions) is the kernels' (hcloth_ros.core.kernels.layout); its spring kinds:
-from hcloth_ros.core.kernels.layout import STENCIL_DC, STENCIL_DR, STENCIL_SIZE  # noqa: F401
 STENCIL_KIND = ('struct_u', 'struct_u', 'struct_v', 'struct_v', 'shear', 'shear',
                 'shear', 'shear', 'bend_u', 'bend_u', 'bend_v', 'bend_v')
 
 
 @dataclass(frozen=True)
 class Placement:
-    """Where the rest rectangle sits in the world frame at t = 0.
+    """
+    Where the rest rectangle sits in the world frame at t = 0.
 
     A grid point at (row r, column c) of a level starts at
     ``origin + u * axis_u + v * axis_v`` with ``u = c * du`` and ``v = r * dv``.
@@ -44,7 +46,8 @@ class Placement:
 
 @dataclass(frozen=True)
 class Level:
-    """One level of the hierarchy: a regular grid and its springs.
+    """
+    One level of the hierarchy: a regular grid and its springs.
 
     Arrays are read-only. ``mass`` is the lumped mass of each grid point (kg), shape
     ``(rows, cols)``. ``rest`` and ``stiffness`` are per stencil direction (m, N/m), shape
@@ -73,17 +76,17 @@ class Level:
 
 
 class ClothModel:
-    """Static data of a hierarchical cloth; build it with :class:`ClothBuilder`.
+    """
+    Static data of a hierarchical cloth; build it with :class:`ClothBuilder`.
 
-    Attributes:
-        levels: tuple of :class:`Level`, coarse to fine.
-        level_count: number of levels.
-        point_count: points of the finest level (ids ``0 .. point_count-1``).
-        parents: int64 ``(point_count, 2)``: for an id inserted at level k >= 1, the two
-            level k-1 ids of the edge it was inserted on; ``-1`` for level-0 ids.
-        intro_level: int64 ``(point_count,)``: the level that inserts each id.
-        total_mass: kg, the same at every level.
-        gravity: m/s^2, shape ``(3,)``.
+    :ivar levels: tuple of :class:`Level`, coarse to fine.
+    :ivar level_count: number of levels.
+    :ivar point_count: points of the finest level (ids ``0 .. point_count-1``).
+    :ivar parents: int64 ``(point_count, 2)``: for an id inserted at level k >= 1, the two
+        level k-1 ids of the edge it was inserted on; ``-1`` for level-0 ids.
+    :ivar intro_level: int64 ``(point_count,)``: the level that inserts each id.
+    :ivar total_mass: kg, the same at every level.
+    :ivar gravity: m/s^2, shape ``(3,)``.
     """
 
     def __init__(self, width, height, placement, levels, parents, intro_level,
@@ -108,7 +111,7 @@ class ClothModel:
         return self.levels[k]
 
     def rest_positions(self, k):
-        """Initial positions of level k as a ``(3, rows, cols)`` float64 array (SoA)."""
+        """Return level k's initial positions, a ``(3, rows, cols)`` float64 array (SoA)."""
         lv = self.level(k)
         u = np.arange(lv.cols) * lv.du
         v = np.arange(lv.rows) * lv.dv
@@ -120,7 +123,8 @@ class ClothModel:
         return np.ascontiguousarray(q)
 
     def grid_triangles(self, k):
-        """Triangles of level k as ``(2 * (rows-1) * (cols-1), 3)`` grid-order indices.
+        """
+        Triangles of level k as ``(2 * (rows-1) * (cols-1), 3)`` grid-order indices.
 
         Each quad is split along the same diagonal the hierarchy inserts points on, so a
         face-centre point of the next level lies on a triangle edge.
@@ -138,7 +142,8 @@ class ClothModel:
         return self.level(k).grid_to_id.ravel()
 
     def anchor(self, point_id):
-        """The coarser point that stands in for ``point_id`` on the level below its own.
+        """
+        Return the coarser point that stands in for ``point_id`` one level below its own.
 
         For an inserted point this is the first of its two parents; level-0 points have
         no anchor (-1). Holding the anchor keeps the coarse levels from dragging a held
@@ -147,15 +152,18 @@ class ClothModel:
         return int(self.parents[point_id, 0])
 
     def representative(self, point_id, k):
-        """The id that stands for ``point_id`` on level k (itself if it exists there)."""
+        """Return the id that stands for ``point_id`` on level k (itself if it exists)."""
         pid = int(point_id)
         while self.intro_level[pid] > k:
             pid = self.anchor(pid)
         return pid
 
     def footprint(self, point_id, k):
-        """The level-k ids a grasp of ``point_id`` holds: the id itself where it exists,
-        else the footprints of both end points of the edge it was inserted on.
+        """
+        Return the level-k ids a grasp of ``point_id`` holds.
+
+        The id itself where it exists, else the footprints of both end points of the edge
+        it was inserted on.
 
         Holding only the first parent (the anchor) is not enough for a grasp: the other
         end point, free on the coarser level, sags away from the grasp, and on the finer
@@ -228,23 +236,23 @@ def _hierarchy_numbering(shapes):
 
 
 class ClothBuilder:
-    """Collects a cloth description and turns it into a :class:`ClothModel`.
+    """
+    Collects a cloth description and turns it into a :class:`ClothModel`.
 
-    Args:
-        width, height: the rest rectangle along ``axis_u`` and ``axis_v`` (m).
-        resolution: level-0 points along u and v, e.g. ``(9, 9)``; each at least 2.
-        level_count: number of levels (1 = a single grid).
-        total_mass: kg, spread by area over every level's points.
-        k_struct, k_shear, k_bend: spring stiffness (N/m) of structural, shear and
-            bending springs on level 0.
-        stiffness_scale: per-level factor on all three stiffnesses (default all 1: a
-            spring of a regular grid represents the same membrane stiffness at any
-            spacing, so N/m does not change with refinement).
-        contraction: per-level contraction resistance c in [0, 1]: a compressed spring
-            pushes back with c times its force (paper section IV).
-        placement: :class:`Placement` of the rectangle at t = 0.
-        gravity: m/s^2.
-        scene: a :class:`hcloth_ros.core.scene.Scene` of static obstacles, or None.
+    :param width, height: the rest rectangle along ``axis_u`` and ``axis_v`` (m).
+    :param resolution: level-0 points along u and v, e.g. ``(9, 9)``; each at least 2.
+    :param level_count: number of levels (1 = a single grid).
+    :param total_mass: kg, spread by area over every level's points.
+    :param k_struct, k_shear, k_bend: spring stiffness (N/m) of structural, shear and
+        bending springs on level 0.
+    :param stiffness_scale: per-level factor on all three stiffnesses (default all 1: a
+        spring of a regular grid represents the same membrane stiffness at any
+        spacing, so N/m does not change with refinement).
+    :param contraction: per-level contraction resistance c in [0, 1]: a compressed spring
+        pushes back with c times its force (paper section IV).
+    :param placement: :class:`Placement` of the rectangle at t = 0.
+    :param gravity: m/s^2.
+    :param scene: a :class:`hcloth_ros.core.scene.Scene` of static obstacles, or None.
     """
 
     def __init__(self, width=1.0, height=1.0, resolution=(9, 9), level_count=3,
@@ -318,10 +326,10 @@ class ClothBuilder:
             stiffness = np.array([kind_k[kind] for kind in STENCIL_KIND]) * scales[k]
             id_to_grid = np.empty(rows * cols, dtype=np.int64)
             id_to_grid[grid_to_id[k].ravel()] = np.arange(rows * cols)
-            arrays = dict(mass=_lumped_mass(rows, cols, self.total_mass), rest=rest,
-                          stiffness=stiffness,
-                          stiffness_sum=_stiffness_sum(rows, cols, stiffness),
-                          id_to_grid=id_to_grid, grid_to_id=grid_to_id[k])
+            arrays = {'mass': _lumped_mass(rows, cols, self.total_mass), 'rest': rest,
+                      'stiffness': stiffness,
+                      'stiffness_sum': _stiffness_sum(rows, cols, stiffness),
+                      'id_to_grid': id_to_grid, 'grid_to_id': grid_to_id[k]}
             for array in arrays.values():
                 array.setflags(write=False)
             levels.append(Level(index=k, rows=rows, cols=cols, du=du, dv=dv,

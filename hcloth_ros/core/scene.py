@@ -1,4 +1,5 @@
-"""Static obstacles the cloth rests on: planes, axis-aligned boxes and spheres.
+"""
+Static obstacles the cloth rests on: planes, axis-aligned boxes and spheres.
 
 A point that ends a step inside an obstacle (grown by ``margin``, the cloth's half
 thickness) is moved to the nearest surface point; the normal velocity into the obstacle is
@@ -13,15 +14,15 @@ import numpy as np
 
 @dataclass(frozen=True)
 class Scene:
-    """Obstacles as packed float64 arrays (the layout the contact kernel reads).
+    """
+    Obstacles as packed float64 arrays (the layout the contact kernel reads).
 
-    Attributes:
-        planes: ``(P, 4)``: unit normal ``n`` and offset ``d``; the free side is
-            ``n . x >= d``.
-        boxes: ``(B, 6)``: centre and half extents of axis-aligned boxes (m).
-        spheres: ``(S, 4)``: centre and radius (m).
-        friction: Coulomb coefficient, >= 0.
-        margin: distance kept from every surface (m), >= 0.
+    :ivar planes: ``(P, 4)``: unit normal ``n`` and offset ``d``; the free side is
+        ``n . x >= d``.
+    :ivar boxes: ``(B, 6)``: centre and half extents of axis-aligned boxes (m).
+    :ivar spheres: ``(S, 4)``: centre and radius (m).
+    :ivar friction: Coulomb coefficient, >= 0.
+    :ivar margin: distance kept from every surface (m), >= 0.
     """
 
     planes: np.ndarray
@@ -36,12 +37,12 @@ class Scene:
 
 
 def make_scene(ground_z=None, boxes=(), spheres=(), friction=0.5, margin=0.002):
-    """Build a :class:`Scene`, checking every number.
+    """
+    Build a :class:`Scene`, checking every number.
 
-    Args:
-        ground_z: height of a ground plane with normal +z, or None for no ground.
-        boxes: iterable of ``(cx, cy, cz, hx, hy, hz)``.
-        spheres: iterable of ``(cx, cy, cz, radius)``.
+    :param ground_z: height of a ground plane with normal +z, or None for no ground.
+    :param boxes: iterable of ``(cx, cy, cz, hx, hy, hz)``.
+    :param spheres: iterable of ``(cx, cy, cz, radius)``.
     """
     planes = np.zeros((0, 4))
     if ground_z is not None:

@@ -1,4 +1,5 @@
-"""Solvers: one ``step(state, control, dt)`` per method, selectable by name.
+"""
+Solvers: one ``step(state, control, dt)`` per method, selectable by name.
 
 =================  ==================================================================
 ``explicit``       symplectic Euler on one level: the baseline that blows up at large
@@ -24,21 +25,22 @@ and refuses a step that is non-finite or stretches a spring beyond ``blowup_stra
 state keeps its last good value and the report says why.
 """
 
-import time
 from dataclasses import dataclass, field
-
-import numba
-import numpy as np
+import time
 
 from hcloth_ros.core import kernels
 from hcloth_ros.core.control import FREE
+import numba
+import numpy as np
+
 
 EXTERNAL_MODES = ('exact', 'literal')
 
 
 @dataclass
 class StepReport:
-    """What one call to ``step`` did.
+    """
+    What one call to ``step`` did.
 
     ``ok`` is False when the step was refused (``reason`` says why) and the state was left
     as it was. ``max_strain``/``mean_strain`` are relative stretch of structural and shear
@@ -58,25 +60,25 @@ class StepReport:
 
 
 class Solver:
-    """Shared machinery: buffers, holds, post-processing, blow-up check and commit.
+    """
+    Shared machinery: buffers, holds, post-processing, blow-up check and commit.
 
-    Args:
-        model: the :class:`ClothModel`.
-        external: ``'exact'`` or ``'literal'`` (see the module docstring).
-        strain_limit: largest stretch kept by strain limiting (0.1 = 10 %), or None to
-            switch it off.
-        strain_iterations: most Jacobi sweeps of strain limiting per step on a level that
-            integrates all its points (level 0, or the one level of a single-level solver).
-        strain_refine_iterations: most sweeps on a refinement level of the hierarchy. Its
-            inherited points are fixed, so it only straightens what lies between them; it
-            cannot undo a coarser level's stretch and would spend any budget trying.
-        strain_tolerance: sweeps stop once no spring exceeds the limit by more than this
-            (relative to the limit).
-        blowup_strain: a step that leaves a spring stretched beyond this (relative) or
-            any value non-finite is refused.
-        builds: ``'serial'`` or ``'parallel'`` kernel builds on every level (or a kernel
-            set with their names), or None: the parallel builds on levels large enough to
-            split when numba runs several threads (see :mod:`hcloth_ros.core.kernels`).
+    :param model: the :class:`ClothModel`.
+    :param external: ``'exact'`` or ``'literal'`` (see the module docstring).
+    :param strain_limit: largest stretch kept by strain limiting (0.1 = 10 %), or None to
+        switch it off.
+    :param strain_iterations: most Jacobi sweeps of strain limiting per step on a level that
+        integrates all its points (level 0, or the one level of a single-level solver).
+    :param strain_refine_iterations: most sweeps on a refinement level of the hierarchy. Its
+        inherited points are fixed, so it only straightens what lies between them; it
+        cannot undo a coarser level's stretch and would spend any budget trying.
+    :param strain_tolerance: sweeps stop once no spring exceeds the limit by more than this
+        (relative to the limit).
+    :param blowup_strain: a step that leaves a spring stretched beyond this (relative) or
+        any value non-finite is refused.
+    :param builds: ``'serial'`` or ``'parallel'`` kernel builds on every level (or a kernel
+        set with their names), or None: the parallel builds on levels large enough to
+        split when numba runs several threads (see :mod:`hcloth_ros.core.kernels`).
     """
 
     name = ''
@@ -132,8 +134,12 @@ class Solver:
 
     # --- shared --------------------------------------------------------------------------
     def kernels(self, k):
-        """The kernel builds for level k: parallel only with several numba threads and a
-        level large enough to split (:func:`kernels.builds`)."""
+        """
+        Return the kernel builds for level k.
+
+        Parallel only with several numba threads and a level large enough to split
+        (:func:`kernels.builds`), unless the solver was built with ``builds``.
+        """
         if self._builds is not None:
             return self._builds
         lv = self.model.level(k)
@@ -149,24 +155,23 @@ class Solver:
 
     def _prescribe(self, k, state, holds, h):
         self.kernels(k).prescribe(state.q[k], state.qd[k], holds.kind, holds.drive_index,
-                          holds.drive_target, h, self._presc[k])
+                                  holds.drive_target, h, self._presc[k])
 
     def _post(self, k, state, holds, h, inherited_fixed):
         """Strain limiting, then contact: no point ends the step inside an obstacle."""
-        lv = self.model.level(k)
+        lv, kit = self.model.level(k), self.kernels(k)
         if self.strain_limit is not None:
-            sweeps = self.kernels(k).strain_limit(self._q[k], self._qd[k], self._dv[k], lv.rest,
-                                          holds.kind, inherited_fixed, self.strain_limit,
-                                          self.strain_refine_iterations if inherited_fixed
-                                          else self.strain_iterations,
-                                          self.strain_tolerance, h,
-                                          self._scratch[k])
+            sweeps = kit.strain_limit(
+                self._q[k], self._qd[k], self._dv[k], lv.rest, holds.kind, inherited_fixed,
+                self.strain_limit,
+                self.strain_refine_iterations if inherited_fixed else self.strain_iterations,
+                self.strain_tolerance, h, self._scratch[k])
             self._extra[f'strain_sweeps_{k}'] = sweeps
         scene = self.model.scene
         if scene is not None and not scene.empty:
-            self.kernels(k).contact(self._q[k], self._qd[k], self._dv[k], state.q[k], holds.kind,
-                            inherited_fixed, scene.planes, scene.boxes, scene.spheres,
-                            scene.friction, scene.margin)
+            kit.contact(self._q[k], self._qd[k], self._dv[k], state.q[k], holds.kind,
+                        inherited_fixed, scene.planes, scene.boxes, scene.spheres,
+                        scene.friction, scene.margin)
 
     def step(self, state, control, dt):
         """Advance ``state`` by ``dt`` seconds under ``control``; return a StepReport."""
@@ -198,7 +203,7 @@ class Solver:
         mean = 0.0
         for k in levels:
             mx, mean, finite = self.kernels(k).strain_stats(self._q[k], self._qd[k],
-                                                    self.model.level(k).rest)
+                                                            self.model.level(k).rest)
             if not finite:
                 return StepReport(False, f'non-finite state on level {k}: step refused, '
                                   'last good state kept', levels=tuple(levels))
@@ -211,6 +216,7 @@ class Solver:
 
 
 class _SingleLevel(Solver):
+
     def __init__(self, model, level=None, **options):
         super().__init__(model, **options)
         self.level = model.level_count - 1 if level is None else int(level)
@@ -228,8 +234,8 @@ class ExplicitSolver(_SingleLevel):
     def _integrate(self, k, state, holds, h):
         lv = self.model.level(k)
         self.kernels(k).explicit_step(state.q[k], state.qd[k], lv.mass, lv.rest, lv.stiffness,
-                              lv.contraction, holds.kind, self._presc[k], h,
-                              self.model.gravity, self._q[k], self._qd[k], self._dv[k])
+                                      lv.contraction, holds.kind, self._presc[k], h,
+                                      self.model.gravity, self._q[k], self._qd[k], self._dv[k])
         self._post(k, state, holds, h, False)
 
 
@@ -244,18 +250,19 @@ class ApproxSolver(_SingleLevel):
 
 
 def _eq6(solver, k, state, holds, h):
-    lv = solver.model.level(k)
+    lv, kit = solver.model.level(k), solver.kernels(k)
     ft, a = solver._scratch[k], solver._a[k]
-    solver.kernels(k).eq6_first_sweep(state.q[k], state.qd[k], lv.mass, lv.rest, lv.stiffness,
-                            lv.contraction, solver.dinv(k, h), holds.kind, solver._presc[k],
-                            h, solver.model.gravity, solver.literal, ft, a)
-    solver.kernels(k).eq6_second_sweep(state.q[k], state.qd[k], lv.stiffness, solver.dinv(k, h),
-                             holds.kind, solver._presc[k], ft, a, h, solver.model.gravity,
-                             solver.literal, solver._q[k], solver._qd[k], solver._dv[k])
+    kit.eq6_first_sweep(state.q[k], state.qd[k], lv.mass, lv.rest, lv.stiffness,
+                        lv.contraction, solver.dinv(k, h), holds.kind, solver._presc[k], h,
+                        solver.model.gravity, solver.literal, ft, a)
+    kit.eq6_second_sweep(state.q[k], state.qd[k], lv.stiffness, solver.dinv(k, h), holds.kind,
+                         solver._presc[k], ft, a, h, solver.model.gravity, solver.literal,
+                         solver._q[k], solver._qd[k], solver._dv[k])
 
 
 class HierarchicalSolver(Solver):
-    """The paper's Table 1 over levels ``0 .. finest_level``.
+    """
+    The paper's Table 1 over levels ``0 .. finest_level``.
 
     ``finest_level`` may change between steps: :meth:`set_finest_level` restarts a level
     that comes back from the coarser state, so nothing jumps.
@@ -281,7 +288,8 @@ class HierarchicalSolver(Solver):
         return list(range(self._finest + 1))
 
     def set_finest_level(self, k, state, control):
-        """Simulate levels ``0 .. k`` from the next step; returns k.
+        """
+        Simulate levels ``0 .. k`` from the next step; returns k.
 
         A level that comes back (not simulated while coarser ones moved on) restarts from
         the coarser level's state, positions and velocities prolonged, and the control
@@ -299,18 +307,18 @@ class HierarchicalSolver(Solver):
             _eq6(self, 0, state, holds, h)
             self._post(0, state, holds, h, False)
             return
-        lv = self.model.level(k)
-        self.kernels(k).prolong(self._dv[k - 1], self._dv_app[k])
-        self.kernels(k).eq7_level(state.q[k], state.qd[k], lv.mass, lv.rest, lv.stiffness,
-                          lv.contraction, self.dinv(k, h), holds.kind, self._presc[k], h,
-                          self.model.gravity, self.literal, self._q[k - 1], self._qd[k - 1],
-                          self._dv[k - 1], self._dv_app[k], self._q[k], self._qd[k],
-                          self._dv[k])
+        lv, kit = self.model.level(k), self.kernels(k)
+        kit.prolong(self._dv[k - 1], self._dv_app[k])
+        kit.eq7_level(state.q[k], state.qd[k], lv.mass, lv.rest, lv.stiffness, lv.contraction,
+                      self.dinv(k, h), holds.kind, self._presc[k], h, self.model.gravity,
+                      self.literal, self._q[k - 1], self._qd[k - 1], self._dv[k - 1],
+                      self._dv_app[k], self._q[k], self._qd[k], self._dv[k])
         self._post(k, state, holds, h, True)
 
 
 class ImplicitSolver(_SingleLevel):
-    """Backward Euler on one level, solved to a tolerance: the converged reference.
+    """
+    Backward Euler on one level, solved to a tolerance: the converged reference.
 
     Each Newton iteration solves ``(M - h^2 J(x + h v+)) dv = -R(v+)`` for the residual
     ``R(v+) = M (v+ - v) - h f(x + h v+) - h M g`` by CG, until the estimated
@@ -337,7 +345,7 @@ class ImplicitSolver(_SingleLevel):
         self._work = [np.zeros(shape) for _ in range(8)]
 
     def _integrate(self, k, state, holds, h):
-        lv = self.model.level(k)
+        lv, kit = self.model.level(k), self.kernels(k)
         q, qd = state.q[k], state.qd[k]
         f, rhs, delta, diag, r, z, p, ap = self._work
         free = (holds.kind == FREE).astype(np.float64)
@@ -352,19 +360,18 @@ class ImplicitSolver(_SingleLevel):
         for newton in range(1, self.max_newton + 1):
             np.multiply(v_plus, h, out=x_eval)
             x_eval += q
-            self.kernels(k).spring_forces(x_eval, lv.rest, lv.stiffness, lv.contraction, f)
+            kit.spring_forces(x_eval, lv.rest, lv.stiffness, lv.contraction, f)
             # rhs = -R on free points, zero on held ones
             np.subtract(v_plus, qd, out=rhs)
             rhs *= -lv.mass
             rhs += h * f
             rhs += (h * lv.mass) * g
             rhs *= free
-            self.kernels(k).system_diagonal(x_eval, lv.rest, lv.stiffness, lv.contraction, lv.mass,
-                                    free, h, diag)
-            iters, _ = self.kernels(k).conjugate_gradient(x_eval, lv.rest, lv.stiffness,
-                                                  lv.contraction, lv.mass, free, h, rhs,
-                                                  delta, diag, self.cg_rtol,
-                                                  self.cg_max_iter, r, z, p, ap)
+            kit.system_diagonal(x_eval, lv.rest, lv.stiffness, lv.contraction, lv.mass, free,
+                                h, diag)
+            iters, _ = kit.conjugate_gradient(x_eval, lv.rest, lv.stiffness, lv.contraction,
+                                              lv.mass, free, h, rhs, delta, diag, self.cg_rtol,
+                                              self.cg_max_iter, r, z, p, ap)
             cg_total += iters
             v_plus += delta
             change = h * np.max(np.abs(delta))
@@ -375,8 +382,8 @@ class ImplicitSolver(_SingleLevel):
         np.multiply(v_plus, h, out=x_eval)
         x_eval += q
         np.subtract(v_plus, qd, out=self._dv[k])
-        self._extra = dict(newton_iterations=newton, cg_iterations=cg_total,
-                           converged=converged)
+        self._extra = {'newton_iterations': newton, 'cg_iterations': cg_total,
+                       'converged': converged}
         self._post(k, state, holds, h, False)
 
     def step(self, state, control, dt):
@@ -388,7 +395,8 @@ class ImplicitSolver(_SingleLevel):
 
 
 def _newton_done(change, previous, tolerance):
-    """Whether Newton's remaining error is below ``tolerance``.
+    """
+    Whether Newton's remaining error is below ``tolerance``.
 
     ``change`` is this iteration's largest position update ``h |dv|_inf`` (m),
     ``previous`` the last one (None on the first iteration). The Newton matrix clamps the

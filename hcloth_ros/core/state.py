@@ -4,7 +4,8 @@ import numpy as np
 
 
 class State:
-    """Positions ``q[k]`` and velocities ``qd[k]`` of each level k.
+    """
+    Positions ``q[k]`` and velocities ``qd[k]`` of each level k.
 
     Each is a C-contiguous float64 array of shape ``(3, rows, cols)`` (structure of
     arrays: x, y and z planes), in metres and metres per second, grid order. ``time`` is
@@ -28,7 +29,7 @@ class State:
 
     @classmethod
     def at_rest(cls, model):
-        """The model's rest rectangle with zero velocity at every level."""
+        """Return the model's rest rectangle with zero velocity at every level."""
         q = [model.rest_positions(k) for k in range(model.level_count)]
         return cls(q, [np.zeros_like(a) for a in q])
 

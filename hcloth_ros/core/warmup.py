@@ -1,4 +1,5 @@
-"""Kernels compiled (first start on a machine) or loaded from the cache before stepping.
+"""
+Kernels compiled (first start on a machine) or loaded from the cache before stepping.
 
 :func:`warm_up` runs each requested solver for one step on a tiny cloth, so every kernel
 it needs is compiled with the exact argument types the solver passes. On an empty cache
@@ -13,14 +14,14 @@ import subprocess
 import sys
 import time
 
-import numba
-
 from hcloth_ros.core import kernels
 from hcloth_ros.core.control import Control
 from hcloth_ros.core.model import ClothBuilder
 from hcloth_ros.core.scene import make_scene
 from hcloth_ros.core.solvers import make_solver, prolong_state, SOLVERS
 from hcloth_ros.core.state import State
+import numba
+
 
 # Seconds a kernel took to compile from an empty cache here (2 cores, numba 0.68): only
 # to balance the shares of the processes; unknown kernels count 1.
@@ -40,8 +41,12 @@ def _tiny_model():
 
 
 def _exercise(model, solvers, parallel, energy, builds=None):
-    """One step of each solver (and build), the energy, a level restart: every kernel
-    call the configuration makes. ``builds(name)`` overrides the kernel sets."""
+    """
+    Make every kernel call the configuration makes.
+
+    One step of each solver (and build), the energy, a level restart.
+    ``builds(name)`` overrides the kernel sets.
+    """
     for name in SOLVERS if solvers is None else solvers:
         for build in ('serial', 'parallel') if parallel else ('serial',):
             state = State.at_rest(model)
@@ -63,8 +68,11 @@ def _exercise(model, solvers, parallel, energy, builds=None):
 
 
 class _Recorder:
-    """A kernel set that records each call's dispatcher and arguments instead of
-    running it (results are harmless placeholders the solvers accept)."""
+    """
+    A kernel set that records each call's dispatcher and arguments instead of running it.
+
+    Its results are harmless placeholders the solvers accept.
+    """
 
     RESULTS = {'strain_limit': 0, 'strain_stats': (0.0, 0.0, True),
                'conjugate_gradient': (1, 0.0), 'energy': (0.0, 0.0, 0.0)}
@@ -96,8 +104,11 @@ def kernel_calls(solvers=None, parallel=None, energy=True):
 
 
 def compile_share(solvers, parallel, energy, index, count):
-    """Compile share ``index`` of ``count`` of the configuration's kernels (into the
-    cache). Shares are balanced by :data:`COMPILE_SECONDS`, largest first."""
+    """
+    Compile share ``index`` of ``count`` of the configuration's kernels into the cache.
+
+    Shares are balanced by :data:`COMPILE_SECONDS`, largest first.
+    """
     calls = sorted(kernel_calls(solvers, parallel, energy),
                    key=lambda c: -COMPILE_SECONDS.get(c[0].py_func.__name__, 1.0))
     load = [0.0] * count
@@ -109,7 +120,7 @@ def compile_share(solvers, parallel, energy, index, count):
 
 
 def _stamp(solvers, parallel, energy):
-    """The file that says a configuration's kernels are in the cache (or None)."""
+    """Return the file that says a configuration's kernels are in the cache (or None)."""
     if kernels.jit.CACHE_DIR is None:
         return None
     import llvmlite.binding
@@ -120,8 +131,11 @@ def _stamp(solvers, parallel, energy):
 
 
 def kernels_cached(solvers=None, parallel=None, energy=True):
-    """Whether :func:`warm_up` with these arguments ran on this machine before (it will
-    load, not compile: under a second instead of tens of seconds)."""
+    """
+    Tell whether :func:`warm_up` with these arguments ran on this machine before.
+
+    If so it will load, not compile: under a second instead of tens of seconds.
+    """
     parallel = numba.get_num_threads() > 1 if parallel is None else parallel
     stamp = _stamp(solvers, parallel, energy)
     return stamp is not None and os.path.exists(stamp)
@@ -145,7 +159,8 @@ def _compile_in_processes(solvers, parallel, energy, processes):
 
 
 def warm_up(solvers=None, parallel=None, energy=True, processes=None):
-    """Compile (or load from the cache) the kernels a configuration uses; returns seconds.
+    """
+    Compile (or load from the cache) the kernels a configuration uses; returns seconds.
 
     ``solvers``: names (default: all of :data:`SOLVERS`; the gravity mode is a flag of the
     kernels, so either mode compiles both); ``parallel``: also the parallel builds

@@ -1,4 +1,5 @@
-"""A stand-in robot that folds the cloth, using only sim_node's public topics.
+"""
+A stand-in robot that folds the cloth, using only sim_node's public topics.
 
 It waits for ``cloth/points``, finds the two corners nearest the viewer (smallest y, at the
 smallest and largest x), sends grippers ``left`` and ``right`` there, closes them, lifts
@@ -7,16 +8,15 @@ smallest and largest x), sends grippers ``left`` and ``right`` there, closes the
 
 import sys
 
+from geometry_msgs.msg import PoseStamped
+from hcloth_ros.ros_msgs import points_from_pointcloud2
 import numpy as np
 import rclpy
-from geometry_msgs.msg import PoseStamped
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.qos import qos_profile_sensor_data
 from sensor_msgs.msg import PointCloud2
 from std_msgs.msg import Bool
-
-from hcloth_ros.ros_msgs import points_from_pointcloud2
 
 LIFT = 0.25
 
@@ -35,6 +35,7 @@ def interpolate(plan, t):
 
 
 class FoldClient(Node):
+
     def __init__(self):
         super().__init__('hcloth_fold_client')
         self.pose_pubs = {n: self.create_publisher(PoseStamped, f'cloth/grippers/{n}/pose', 10)

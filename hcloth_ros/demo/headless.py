@@ -1,4 +1,5 @@
-"""Headless engine demo: simulate a scene from ``config/`` and draw it to PNG.
+"""
+Headless engine demo: simulate a scene from ``config/`` and draw it to PNG.
 
     hcloth_demo [--scene config/hanging.yaml] [--seconds 3] [--out out/demo]
 
@@ -11,11 +12,10 @@ import argparse
 import os
 import time
 
-import numpy as np
-
 from hcloth_ros import params
 from hcloth_ros.core import warm_up
 from hcloth_ros.core.metrics import centre_of_mass
+import numpy as np
 
 
 def simulate(values, seconds, snapshot_times, progress=True):
@@ -102,7 +102,7 @@ def main(argv=None):
     args = parser.parse_args(argv)
     values = params.resolve(params.load_file(args.scene))
     print(f'[demo] scene {args.scene}')
-    print(f'[demo] warming up the numba kernels ...', flush=True)
+    print('[demo] warming up the numba kernels ...', flush=True)
     print(f'[demo] warm-up took {warm_up():.2f} s')
     times = [0.0, 0.25, 0.5, 1.0, args.seconds]
     start = time.perf_counter()

@@ -1,4 +1,5 @@
-"""The README's main job: sim_node on the fold scene plus a scripted robot, recorded.
+"""
+The README's main job: sim_node on the fold scene plus a scripted robot, recorded.
 
     hcloth_demo_run [--out out/fold.rrd]
 

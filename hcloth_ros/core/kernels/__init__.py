@@ -1,4 +1,5 @@
-"""Every numba kernel of the engine, by the physics it computes.
+"""
+Every numba kernel of the engine, by the physics it computes.
 
 Map: what the paper (or the method) writes, the kernels that compute it, their plain
 reference forms (numpy, written from the formula) and the tests that hold them together,
@@ -79,11 +80,18 @@ PARALLEL = SimpleNamespace(**{name: globals().get(name + '_parallel', globals()[
 
 
 def builds(rows, cols, threads):
-    """The kernel set for a level of ``rows x cols`` points run with ``threads`` numba
-    threads: the parallel builds only where they split the level among threads."""
+    """
+    Return the kernel set for a level of ``rows x cols`` points and ``threads`` threads.
+
+    The parallel builds only where they split the level among threads.
+    """
     return PARALLEL if threads > 1 and chunk_count(rows, cols) > 1 else SERIAL
 
 
-__all__ = ['builds', 'chunk_count', 'DRIVEN', 'FREE', 'KERNELS', 'PAR_MIN_POINTS', 'PARALLEL',
-           'PINNED', 'SERIAL', 'STENCIL_DC', 'STENCIL_DR', 'STENCIL_SIZE'] + list(KERNELS) + [
-               name + '_parallel' for name in KERNELS if name + '_parallel' in globals()]
+__all__ = ['builds', 'chunk_count', 'contact', 'conjugate_gradient',
+           'conjugate_gradient_parallel', 'DRIVEN', 'energy', 'eq6_first_sweep',
+           'eq6_second_sweep', 'eq7_level', 'eq7_level_parallel', 'excess_threshold',
+           'explicit_step', 'FREE', 'KERNELS', 'PAR_MIN_POINTS', 'PARALLEL', 'PINNED',
+           'prescribe', 'prolong', 'SERIAL', 'spring_forces', 'STENCIL_DC', 'STENCIL_DR',
+           'STENCIL_SIZE', 'strain_limit', 'strain_limit_parallel', 'strain_stats',
+           'strain_stats_parallel', 'system_apply', 'system_apply_parallel', 'system_diagonal']

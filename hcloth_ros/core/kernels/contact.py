@@ -1,4 +1,5 @@
-"""Contact with static obstacles: ground planes, axis-aligned boxes and spheres.
+"""
+Contact with static obstacles: ground planes, axis-aligned boxes and spheres.
 
 A point found inside an obstacle (grown by ``margin``) is moved out along the obstacle's
 normal; its inward normal velocity stops and Coulomb friction slows its tangential
@@ -7,15 +8,18 @@ velocity (never reversing it). See :mod:`hcloth_ros.core.scene` for the obstacle
 
 import math
 
-import numba
 from hcloth_ros.core.kernels.jit import JIT
 from hcloth_ros.core.kernels.layout import FREE
+import numba
 
 
 @numba.njit(**JIT)
 def _resolve(q, qd, dv, r, c, nx, ny, nz, depth, friction):
-    """Move point (r, c) ``depth`` along the unit normal n and apply the contact's
-    velocity change (also added to the step's ``dv``)."""
+    """
+    Move point (r, c) ``depth`` along the unit normal n.
+
+    The contact's velocity change is applied and added to the step's ``dv``.
+    """
     q[0, r, c] += depth * nx
     q[1, r, c] += depth * ny
     q[2, r, c] += depth * nz
@@ -33,7 +37,8 @@ def _resolve(q, qd, dv, r, c, nx, ny, nz, depth, friction):
 
 @numba.njit(**JIT)
 def _box_exit(q, q_prev, r, c, box, margin):
-    """The axis and side (+-1) a point inside ``box`` leaves by, or axis -1 if outside.
+    """
+    Return the axis and side (+-1) a point inside ``box`` leaves by (axis -1: outside).
 
     The face it entered by: the axis on which its start-of-step position was furthest
     outside; the nearest face if it was already inside. (The nearest face alone pushes
@@ -90,8 +95,11 @@ def contact(
         q_prev, hold_kind, inherited_fixed,
         # inputs: the obstacles
         planes, boxes, spheres, friction, margin):
-    """Push the movable points of a level out of the obstacles (held and, with
-    ``inherited_fixed``, inherited points stay where they are)."""
+    """
+    Push the movable points of a level out of the obstacles.
+
+    Held points and, with ``inherited_fixed``, inherited points stay where they are.
+    """
     rows, cols = hold_kind.shape
     for r in range(rows):
         even_row = inherited_fixed and r % 2 == 0

@@ -1,4 +1,5 @@
-"""The paper's eq. 6: two Jacobi sweeps of linearised backward Euler on one level.
+"""
+The paper's eq. 6: two Jacobi sweeps of linearised backward Euler on one level.
 
 With the paper's Jacobian approximation (``J_ij = k_ij I``, ``J_ii = -K_i I``,
 ``K_i = sum_j k_ij``) the system ``(M - h^2 J) dv = h f~`` of eq. 3 has the diagonal
@@ -16,12 +17,11 @@ part only, a held point's ``a`` is its prescribed change less ``h g``, and ``h g
 added to every free point's ``dv``.
 """
 
-import numba
-import numpy as np
-
 from hcloth_ros.core.kernels.jit import JIT
 from hcloth_ros.core.kernels.layout import advance_row, FREE
 from hcloth_ros.core.kernels.springs import force_row, stencil_sum_row
+import numba
+import numpy as np
 
 
 @numba.njit(**JIT)

@@ -1,4 +1,5 @@
-"""The paper's Table 1 on a refinement level: prolongation, constraint C and eq. 7.
+"""
+The paper's Table 1 on a refinement level: prolongation, constraint C and eq. 7.
 
 Level k inserts a point on every edge of level k-1. After level k-1 has stepped:
 
@@ -14,13 +15,12 @@ Level k inserts a point on every edge of level k-1. After level k-1 has stepped:
   change and added back to the result.
 """
 
-import numba
-import numpy as np
-from numba import prange
-
 from hcloth_ros.core.kernels.jit import JIT, serial_and_parallel
 from hcloth_ros.core.kernels.layout import advance_row, chunk_count, FREE
 from hcloth_ros.core.kernels.springs import force_row, stencil_sum_row
+import numba
+from numba import prange
+import numpy as np
 
 
 @numba.njit(**JIT)
@@ -38,11 +38,12 @@ def _prolong_rows(coarse, fine, r0, r1):
 
 @numba.njit(**JIT)
 def prolong(coarse, fine):
-    """Fill a level-k array ``(d, rows, cols)`` from level k-1 by the parent rule.
+    r"""
+    Fill a level-k array ``(d, rows, cols)`` from level k-1 by the parent rule.
 
     Point (r, c) is the mean of coarse points ``(r // 2, c // 2)`` and
     ``((r + 1) // 2, (c + 1) // 2)``: inherited points copy their coarse value, inserted
-    points take the mean of the two ends of the edge they were inserted on (the "\\"
+    points take the mean of the two ends of the edge they were inserted on (the "\"
     diagonal for face centres). Used for eq. 7's estimate and to start a level that is
     simulated again from the coarser state.
     """
@@ -54,7 +55,7 @@ def prolong(coarse, fine):
 
 @numba.njit(**JIT)
 def _hold_estimates(hold_kind, prescribed_dv, dv_estimate):
-    """A held point's estimate is its own prescribed change."""
+    """Set a held point's estimate to its own prescribed change."""
     rows, cols = hold_kind.shape
     for r in range(rows):
         for c in range(cols):

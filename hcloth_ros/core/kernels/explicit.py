@@ -1,11 +1,10 @@
 """Symplectic Euler on one level: the baseline, stable only below ``2 / w_max``."""
 
-import numba
-import numpy as np
-
 from hcloth_ros.core.kernels.jit import JIT
 from hcloth_ros.core.kernels.layout import advance_row, FREE
 from hcloth_ros.core.kernels.springs import force_row
+import numba
+import numpy as np
 
 
 @numba.njit(**JIT)

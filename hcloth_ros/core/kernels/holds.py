@@ -1,14 +1,14 @@
 """Held points: the velocity change that makes them do what the control says."""
 
-import numba
-
 from hcloth_ros.core.kernels.jit import JIT
 from hcloth_ros.core.kernels.layout import PINNED
+import numba
 
 
 @numba.njit(**JIT)
 def prescribe(q, qd, hold_kind, drive_index, drive_target, h, prescribed_dv):
-    """Velocity change of every held point for a step of ``h`` seconds.
+    """
+    Velocity change of every held point for a step of ``h`` seconds.
 
     Pinned: ``-v``, so the new velocity is zero and ``x + h v`` is ``x`` bit for bit.
     Driven (flat grid indices ``drive_index``): the velocity that reaches

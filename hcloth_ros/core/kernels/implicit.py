@@ -1,4 +1,5 @@
-"""Backward Euler's linear algebra (the converged reference solver).
+"""
+Backward Euler's linear algebra (the converged reference solver).
 
 Each Newton iteration of :class:`~hcloth_ros.core.solvers.ImplicitSolver` solves
 
@@ -14,15 +15,13 @@ Dirichlet rows (identity). CG with the Jacobi preconditioner solves it matrix-fr
 
 import math
 
-import numba
-import numpy as np
-from numba import prange
-
 from hcloth_ros.core.kernels.jit import JIT, serial_and_parallel
 from hcloth_ros.core.kernels.layout import (chunk_count, interleaved_dot, row3,
                                             STENCIL_DC, STENCIL_DR,
                                             stencil_span)
 from hcloth_ros.core.kernels.springs import force_row, spring_vector
+import numba
+from numba import prange
 
 
 @numba.njit(**JIT)
@@ -35,7 +34,8 @@ def spring_forces(q, rest, stiffness, contraction, force):
 
 @numba.njit(**JIT)
 def stiffness_block(dx, dy, dz, length, rest, stiffness, contraction):
-    """``(k, b, u)`` of the spring block ``B = k (b I + (1 - b) u u^T)`` (see the module).
+    """
+    ``(k, b, u)`` of the spring block ``B = k (b I + (1 - b) u u^T)`` (see the module).
 
     ``k`` is the contraction-scaled stiffness of a compressed spring; a spring of zero
     length has ``b = 1`` (isotropic) and no direction.
@@ -48,8 +48,11 @@ def stiffness_block(dx, dy, dz, length, rest, stiffness, contraction):
 
 @numba.njit(**JIT)
 def _system_row(q, rest, stiffness, contraction, mass, free, h, p, r, diagonal, out):
-    """Row r of ``(M - h^2 J) p`` into ``out`` (identity on held points), or with
-    ``diagonal`` the row's diagonal entries (``p`` unused; 1 on held points)."""
+    """
+    Write row r of ``(M - h^2 J) p`` into ``out`` (identity on held points).
+
+    With ``diagonal``, the row's diagonal entries instead (``p`` unused; 1 on held points).
+    """
     rows, cols = mass.shape
     h2 = h * h
     ox, oy, oz = row3(out, r, 0)
@@ -121,7 +124,8 @@ def _dot(a, b):
 
 def conjugate_gradient(q, rest, stiffness, contraction, mass, free, h, b, x, diagonal, rtol,
                        max_iter, r, z, p, ap):
-    """Solve ``(M - h^2 J) x = b`` from ``x = 0`` by Jacobi-preconditioned CG.
+    """
+    Solve ``(M - h^2 J) x = b`` from ``x = 0`` by Jacobi-preconditioned CG.
 
     Stops at ``|r| <= rtol |b|`` or after ``max_iter`` iterations; returns
     ``(iterations, |r| / |b|)``. ``r, z, p, ap``: C-contiguous work arrays.

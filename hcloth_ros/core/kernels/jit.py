@@ -1,4 +1,5 @@
-"""The numba flags of every kernel, and where their machine code is cached.
+"""
+The numba flags of every kernel, and where their machine code is cached.
 
 Flags: ``cache=True``, ``error_model='numpy'``, ``nogil=True`` and no ``fastmath`` (fast
 math lets LLVM delete the NaN checks the blow-up detector relies on).
@@ -26,13 +27,13 @@ SOURCES = os.path.dirname(os.path.abspath(__file__))
 PREFIX = 'hcloth_kernels-'
 
 
-def source_digest():
+def source_digest(sources=SOURCES):
     """Digest of every module of the kernel package (names and contents)."""
     digest = hashlib.sha256()
-    for name in sorted(os.listdir(SOURCES)):
+    for name in sorted(os.listdir(sources)):
         if name.endswith('.py'):
             digest.update(name.encode())
-            with open(os.path.join(SOURCES, name), 'rb') as f:
+            with open(os.path.join(sources, name), 'rb') as f:
                 digest.update(f.read())
     return digest.hexdigest()[:16]
 
@@ -47,7 +48,7 @@ def _writable(path):
 
 
 def cache_directory():
-    """The kernels' cache directory (see the module docstring), or None."""
+    """Return the kernels' cache directory (see the module docstring), or None."""
     name = PREFIX + source_digest()
     in_tree = os.path.join(SOURCES, '__pycache__')
     user = os.path.join(os.environ.get('XDG_CACHE_HOME') or os.path.expanduser('~/.cache'),
@@ -68,12 +69,13 @@ def _prune(base, keep):
 
 
 CACHE_DIR = cache_directory()
-JIT = dict(cache=CACHE_DIR is not None, error_model='numpy', nogil=True)
-PJIT = dict(JIT, parallel=True)
+JIT = {'cache': CACHE_DIR is not None, 'error_model': 'numpy', 'nogil': True}
+PJIT = {**JIT, 'parallel': True}
 
 
 def serial_and_parallel(func, parfor=True, **parallel_globals):
-    """Two builds of one kernel written with ``prange``: ``(serial, parallel)``.
+    """
+    Two builds of one kernel written with ``prange``: ``(serial, parallel)``.
 
     In the serial build ``prange`` is ``range``; only the parallel build pays numba's
     parfor compilation (about 2 s a kernel here) and a thread start per call, so a
@@ -94,7 +96,8 @@ def serial_and_parallel(func, parfor=True, **parallel_globals):
 
 @contextlib.contextmanager
 def keyed_cache():
-    """Point numba's cache at :data:`CACHE_DIR` while the kernel modules are decorated.
+    """
+    Point numba's cache at :data:`CACHE_DIR` while the kernel modules are decorated.
 
     Numba fixes a function's cache location when ``njit(cache=True)`` wraps it, so the
     setting is needed only during the imports and is restored after.

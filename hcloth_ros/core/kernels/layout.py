@@ -1,4 +1,5 @@
-"""The grid layout every kernel shares: the spring stencil, hold kinds and row chunks.
+"""
+The grid layout every kernel shares: the spring stencil, hold kinds and row chunks.
 
 Each level is a regular grid; arrays are float64 ``(3, rows, cols)`` (x, y, z planes:
 structure of arrays) or ``(rows, cols)``. Every point has up to 12 springs, one per entry
@@ -14,10 +15,10 @@ vectorises every copy of the inner loop: one such 16-iteration copy loop cost 40
 compilation here, and no speed.
 """
 
+from hcloth_ros.core.kernels.jit import JIT
 import numba
 import numpy as np
 
-from hcloth_ros.core.kernels.jit import JIT
 
 # The 12-spring stencil as (row offset, column offset), in pairs of opposite directions:
 # structural along u, structural along v, the two shear diagonals, bending along u,
@@ -42,7 +43,8 @@ MAX_CHUNKS = 8
 
 @numba.njit(**JIT)
 def chunk_count(rows, cols):
-    """Row chunks a kernel splits a level into for ``prange``.
+    """
+    Row chunks a kernel splits a level into for ``prange``.
 
     1 (one thread) below ``PAR_MIN_POINTS`` points, else about 32 rows a chunk, 2 to
     ``MAX_CHUNKS`` of them (``prange`` hands each thread a contiguous run of chunks). Not
@@ -55,7 +57,8 @@ def chunk_count(rows, cols):
 
 @numba.njit(**JIT)
 def stencil_span(r, s, rows, cols):
-    """Columns ``lo .. hi-1`` of row r whose neighbour in stencil direction s exists.
+    """
+    Columns ``lo .. hi-1`` of row r whose neighbour in stencil direction s exists.
 
     ``hi <= lo`` when the neighbour row is outside the grid. Looping over whole spans of
     columns (not point by point with a bounds check) lets LLVM vectorise the loops.
@@ -69,7 +72,8 @@ def stencil_span(r, s, rows, cols):
 
 @numba.njit(**JIT)
 def row3(a, r, c):
-    """The x, y and z rows of ``a[:, r, c:]``: 1-D contiguous views from column c.
+    """
+    Return the x, y and z rows of ``a[:, r, c:]``: 1-D contiguous views from column c.
 
     Views that start at the first column a loop reads keep every index ``i >= 0``, which
     lets LLVM drop numba's negative-index handling and vectorise.
@@ -79,8 +83,11 @@ def row3(a, r, c):
 
 @numba.njit(**JIT)
 def clear3(x, y, z):
-    """Zero three 1-D buffers of the same length (a loop: numba's slice assignment costs
-    a second of compilation)."""
+    """
+    Zero three 1-D buffers of the same length.
+
+    A loop: numba's slice assignment costs a second of compilation.
+    """
     for i in range(x.shape[0]):
         x[i] = 0.0
         y[i] = 0.0
@@ -98,7 +105,8 @@ def advance_row(x, v, dv, h, x_out, v_out):
 
 @numba.njit(**JIT)
 def interleaved_dot(x, y, n):
-    """``sum_i x[i] y[i]`` over ``i < n`` in eight interleaved partial sums.
+    """
+    ``sum_i x[i] y[i]`` over ``i < n`` in eight interleaved partial sums.
 
     A sequential sum cannot vectorise (every add waits for the previous one); eight
     independent sums can. The order is fixed, so the result is the same bits every run.

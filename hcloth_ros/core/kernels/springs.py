@@ -1,4 +1,5 @@
-"""Spring forces and stencil sums along a grid row: the pieces every step is made of.
+"""
+Spring forces and stencil sums along a grid row: the pieces every step is made of.
 
 Every per-row function covers the whole row, border columns included: each stencil
 direction is one loop over the span of columns whose neighbour exists
@@ -11,16 +12,15 @@ twelve reads too many distinct arrays and stays scalar).
 
 import math
 
-import numba
-
 from hcloth_ros.core.kernels.jit import JIT
 from hcloth_ros.core.kernels.layout import (clear3, row3, STENCIL_DC, STENCIL_DR,
                                             stencil_span)
+import numba
 
 
 @numba.njit(**JIT)
 def spring_vector(xn, yn, zn, xp, yp, zp, i):
-    """The spring from point ``p[i]`` to ``n[i]``: its vector ``d`` (m) and length."""
+    """Return the vector ``d`` (m) and the length of the spring from ``p[i]`` to ``n[i]``."""
     dx = xn[i] - xp[i]
     dy = yn[i] - yp[i]
     dz = zn[i] - zp[i]
@@ -29,7 +29,8 @@ def spring_vector(xn, yn, zn, xp, yp, zp, i):
 
 @numba.njit(**JIT)
 def spring_coefficient(length, rest, stiffness, contraction):
-    """Hooke's law as force per metre of spring vector: ``f = coef * d`` (N/m).
+    """
+    Hooke's law as force per metre of spring vector: ``f = coef * d`` (N/m).
 
     ``coef = k (|d| - L) / |d|`` with ``k`` the stiffness when stretched and
     ``contraction * k`` when compressed (the paper's contraction resistance c); 0 for a
@@ -42,7 +43,8 @@ def spring_coefficient(length, rest, stiffness, contraction):
 
 @numba.njit(**JIT)
 def force_row(q, qd, r, rest, stiffness, contraction, h, viscous, fx, fy, fz):
-    """Spring force on every point of row r into ``fx, fy, fz`` (N), shape ``(cols,)``.
+    """
+    Spring force on every point of row r into ``fx, fy, fz`` (N), shape ``(cols,)``.
 
     ``f_i = sum_s coef_s d_s`` over the existing stencil neighbours (see
     :func:`spring_coefficient`); with ``viscous``, the paper's eq. 4 filtered force
@@ -77,7 +79,8 @@ def force_row(q, qd, r, rest, stiffness, contraction, h, viscous, fx, fy, fz):
 
 @numba.njit(**JIT)
 def stencil_sum_row(a, r, stiffness, shift, sx, sy, sz):
-    """``sum_s k_s (a[:, neighbour_s] - shift)`` for every point of row r into ``s*``.
+    """
+    Sum ``k_s (a[:, neighbour_s] - shift)`` over s for every point of row r into ``s*``.
 
     The off-diagonal product of the paper's Jacobian approximation with a field (eq. 6's
     second sweep, eq. 7's neighbour term); ``shift`` (3 floats) is subtracted from every

@@ -1,4 +1,5 @@
-"""What a level looks like after a step: strain and finiteness (the blow-up check), energy.
+"""
+What a level looks like after a step: strain and finiteness (the blow-up check), energy.
 
 Each spring is counted once, from the end it leaves by an even stencil entry (rightwards,
 downwards, or diagonally down).
@@ -6,22 +7,24 @@ downwards, or diagonally down).
 
 import math
 
-import numba
-import numpy as np
-from numba import prange
-
 from hcloth_ros.core.kernels.jit import JIT, serial_and_parallel
 from hcloth_ros.core.kernels.layout import (chunk_count, interleaved_dot, row3,
                                             STENCIL_DC, STENCIL_DR,
                                             stencil_span)
 from hcloth_ros.core.kernels.springs import spring_vector
+import numba
+from numba import prange
+import numpy as np
 
 
 @numba.njit(**JIT)
 def _strain_row(q, rest, r, s, magnitude, positive):
-    """Strains ``|d| / L - 1`` of the springs leaving row r in direction s: their
-    magnitudes (finite ones, else 0) and positive parts into the buffers; returns
-    ``(springs, finite springs)``."""
+    """
+    Compute the strains ``|d| / L - 1`` of the springs leaving row r in direction s.
+
+    Their magnitudes (finite ones, else 0) and positive parts go into the buffers; returns
+    ``(springs, finite springs)``.
+    """
     lo, hi = stencil_span(r, s, q.shape[1], q.shape[2])
     if hi <= lo:
         return 0, 0
@@ -72,8 +75,11 @@ def _stats_rows(q, qd, rest, r0, r1, row_max, row_sum, row_count, row_bad):
 
 
 def strain_stats(q, qd, rest):
-    """Largest and mean relative stretch of structural and shear springs, and whether
-    every position, velocity and strain is finite: ``(max_strain, mean_strain, finite)``.
+    """
+    Return the largest and mean strain of stretch springs and whether all is finite.
+
+    ``(max_strain, mean_strain, finite)``: relative stretch of structural and shear
+    springs, and whether every position, velocity and strain is finite.
 
     A non-finite strain counts as not finite and is left out of the max and the mean.
     """

@@ -1,4 +1,5 @@
-"""Strain limiting (Provot 1995) by Jacobi sweeps over structural and shear springs.
+"""
+Strain limiting (Provot 1995) by Jacobi sweeps over structural and shear springs.
 
 A spring longer than ``limit = (1 + max_stretch) L`` pulls its movable ends towards each
 other: ``share (|d| - limit) / |d| d`` onto each end (``share`` 1 when the other end is
@@ -20,13 +21,13 @@ a chunk applies its corrections only once the sweep is known to happen, i.e. onc
 spring over the tolerance has been seen, and the rest afterwards.
 """
 
-import numba
-import numpy as np
-from numba import prange
-
 from hcloth_ros.core.kernels.jit import JIT, serial_and_parallel
 from hcloth_ros.core.kernels.layout import chunk_count, FREE
 from hcloth_ros.core.kernels.springs import spring_vector
+import numba
+from numba import prange
+import numpy as np
+
 
 # Points a block of rows holds at most (its spring terms stay in the core's caches).
 BLOCK_POINTS = 2048
@@ -39,7 +40,8 @@ SPLIT_ROWS = False
 
 @numba.njit(**JIT)
 def excess_threshold(limit, tolerance):
-    """Smallest float64 ``x`` with ``x / limit - 1.0 > tolerance`` (in floating point).
+    """
+    Smallest float64 ``x`` with ``x / limit - 1.0 > tolerance`` (in floating point).
 
     Both operations are monotone, so for a spring longer than ``limit`` the test
     ``length >= threshold`` equals ``length / limit - 1.0 > tolerance`` exactly, without
@@ -64,7 +66,8 @@ def excess_threshold(limit, tolerance):
 
 @numba.njit(**JIT)
 def _direction(q, movable, valid, lo, stop, end, offset, limit, threshold, terms, e0, base):
-    """Springs from flat points ``lo .. stop-1`` to the point ``offset`` further.
+    """
+    Springs from flat points ``lo .. stop-1`` to the point ``offset`` further.
 
     Writes the first end's term ``share (|d| - limit) / |d| d`` and the over-limit flag
     (1.0) into ``terms[e0 .. e0+3, k - base]`` for an existing spring (``valid``, indexed
@@ -99,7 +102,8 @@ def _direction(q, movable, valid, lo, stop, end, offset, limit, threshold, terms
 
 @numba.njit(**JIT)
 def _forward_terms(q, movable, masks, ra, rb, rows, cols, limit, threshold, terms, base):
-    """Forward spring terms of rows ``ra .. rb-1`` into ``terms[:, k - base]``.
+    """
+    Forward spring terms of rows ``ra .. rb-1`` into ``terms[:, k - base]``.
 
     Directions (0, 1), (1, 0), (1, 1) and (1, -1) in entry groups 0, 4, 8 and 12;
     ``masks[0]`` / ``masks[1]``: 1.0 where a point of a block has a right / left
@@ -119,7 +123,8 @@ def _forward_terms(q, movable, masks, ra, rb, rows, cols, limit, threshold, term
 
 @numba.njit(**JIT)
 def _term_sum(terms, e, pad, cols, n, sign, out):
-    """``out[i] = sum`` of point i's eight spring terms in entry ``e`` of each group.
+    """
+    ``out[i] = sum`` of point i's eight spring terms in entry ``e`` of each group.
 
     In stencil order: (0, 1) forward, then backward (the left neighbour's term, times
     ``sign``), (1, 0) and (-1, 0), (1, 1) and (-1, -1), (1, -1) and (-1, 1). Point i's
@@ -160,8 +165,11 @@ def _apply(q, qd, dv, corr, lo, hi, h):
 
 @numba.njit(**JIT)
 def _copy_terms(src, i, dst, j, n):
-    """``dst[:, j:j+n] = src[:, i:i+n]`` (a loop: numba's slice assignment costs seconds
-    of compilation)."""
+    """
+    Copy ``src[:, i:i+n]`` to ``dst[:, j:j+n]``.
+
+    A loop: numba's slice assignment costs seconds of compilation.
+    """
     for e in range(src.shape[0]):
         a, b = src[e, i:i + n], dst[e, j:j + n]
         for k in range(n):
@@ -171,7 +179,8 @@ def _copy_terms(src, i, dst, j, n):
 @numba.njit(**JIT)
 def _chunk_sweep(q, qd, dv, corr, movable, masks, rows, cols, r0, r1, block_rows, limit,
                  threshold, h, edge_before, edge_after, terms, counted, applied):
-    """One sweep over rows ``r0 .. r1-1`` (see the module docstring).
+    """
+    One sweep over rows ``r0 .. r1-1`` (see the module docstring).
 
     ``edge_before`` / ``edge_after``: the forward terms of rows ``r0 - 1`` and ``r1 - 1``
     computed before the sweep (zeros for ``r0 = 0``; unused for ``r1 = rows``).
@@ -204,8 +213,11 @@ def _chunk_sweep(q, qd, dv, corr, movable, masks, rows, cols, r0, r1, block_rows
 
 @numba.njit(**JIT)
 def _movable_flags(hold_kind, inherited_fixed):
-    """1.0 for points strain limiting may move: free, and not inherited from the
-    coarser level when ``inherited_fixed``."""
+    """
+    Return 1.0 for each point strain limiting may move, else 0.0 (flat).
+
+    Movable: free, and not inherited from the coarser level when ``inherited_fixed``.
+    """
     rows, cols = hold_kind.shape
     movable = np.empty(rows * cols)
     for r in range(rows):
@@ -230,7 +242,8 @@ def _block_masks(block_rows, cols):
 
 def strain_limit(q, qd, dv, rest, hold_kind, inherited_fixed, max_stretch, max_iterations,
                  tolerance, h, corr):
-    """Limit the stretch of structural and shear springs to ``max_stretch`` (in place).
+    """
+    Limit the stretch of structural and shear springs to ``max_stretch`` (in place).
 
     ``q, qd, dv``: the level's positions, velocities and velocity change of the step, all
     corrected; ``rest``: per stencil entry (a spring has one rest length: entries 2 j and

@@ -1,0 +1,212 @@
+"""
+The node's units without a ROS graph: governor, grippers, publisher, parameter checks.
+
+Made-up tick times drive the governor; grippers act on a real engine Control; the
+publisher gets fake publishers that count what they are given.
+"""
+
+from hcloth_ros import params
+from hcloth_ros.core import ClothBuilder, Control, State
+from hcloth_ros.governor import finest_to_simulate, Governor
+from hcloth_ros.grippers import GripperBank, points_within
+from hcloth_ros.node_params import check_change, descriptor, NODE_PARAMS, unknown_overrides
+from hcloth_ros.publishing import ClothPublisher
+from hcloth_ros.ros_msgs import points_from_pointcloud2
+from hcloth_ros.tick_stats import TickStats
+import numpy as np
+import pytest
+
+
+PERIOD = 1.0 / 60.0
+
+
+def governor(**options):
+    return Governor(PERIOD, top_level=4, floor=1, grace_ticks=0, **options)
+
+
+def test_governor_drops_a_level_after_three_overruns_in_a_row():
+    g = governor()
+    assert [g.judge(2 * PERIOD) for _ in range(2)] == [None, None]
+    g.judge(0.5 * PERIOD)                       # a tick that fits: the count starts again
+    assert [g.judge(2 * PERIOD) for _ in range(3)] == [None, None, 'drop']
+    assert g.cap == 3
+
+
+def test_governor_never_drops_below_its_floor():
+    g = governor()
+    for _ in range(100):
+        g.judge(10 * PERIOD)
+    assert g.cap == g.floor == 1
+
+
+def test_governor_restores_after_sixty_ticks_of_headroom():
+    g = governor()
+    g.cap = 2
+    quick = 0.1 * PERIOD                        # 2.5x the work still fits in 80 %
+    assert [g.judge(quick) for _ in range(59)] == [None] * 59
+    assert g.judge(quick) == 'restore' and g.cap == 3
+    # a tick with 2.5x the work over 80 % of the period is no headroom
+    assert all(g.judge(0.5 * PERIOD) is None for _ in range(200)) and g.cap == 3
+    for _ in range(120):
+        g.judge(quick)
+    assert g.cap == 4                          # and never above the top level
+    assert all(g.judge(quick) is None for _ in range(100)) and g.cap == 4
+
+
+def test_governor_does_not_judge_during_its_grace_ticks():
+    g = Governor(PERIOD, top_level=4, grace_ticks=5)
+    assert all(g.judge(10 * PERIOD) is None for _ in range(5 + 2))
+    assert g.judge(10 * PERIOD) == 'drop'
+    g.restart_grace()
+    assert all(g.judge(10 * PERIOD) is None for _ in range(5 + 2)) and g.cap == 3
+
+
+@pytest.mark.parametrize('consumed_all,lod,cap,expected', [
+    (True, 1, 4, 4), (False, 1, 4, 1), (True, 1, 2, 2), (True, 3, 2, 3), (False, 0, 4, 0)])
+def test_finest_to_simulate(consumed_all, lod, cap, expected):
+    assert finest_to_simulate(consumed_all, lod, cap, 4) == expected
+
+
+@pytest.fixture
+def cloth():
+    model = ClothBuilder(resolution=(3, 3), level_count=3).finalize()
+    return model, State.at_rest(model), Control(model)
+
+
+def near(model, state):
+    def points_near(position):
+        return points_within(state.points_by_id(model, model.level_count - 1), position, 0.05)
+    return points_near
+
+
+def test_gripper_names_empty_repeated_or_with_a_slash_are_refused():
+    bank = GripperBank(['a', '', 'a', 'b/c', 'd'])
+    assert bank.names() == ['a', 'd'] and bank.refused == ['', 'a', 'b/c']
+
+
+@pytest.mark.parametrize('frame,position,orientation,severity', [
+    ('map', (0, 0, 1), (0, 0, 0, 1), 'warning'),
+    ('world', (0, float('nan'), 1), (0, 0, 0, 1), 'error'),
+    ('world', (0, 0, float('inf')), (0, 0, 0, 1), 'error'),
+    ('world', (0, 0, 1), (0, 0, 0, 0), 'error'),
+    ('world', (0, 0, 1), (0, float('nan'), 0, 1), 'error')])
+def test_bad_poses_are_dropped_with_a_reason(frame, position, orientation, severity):
+    bank = GripperBank(['left'])
+    dropped = bank.set_pose('left', frame, 'world', position, orientation)
+    assert dropped[0] == severity and 'left' in dropped[1]
+    assert bank['left'].translation is None and not bank['left'].pose_pending
+
+
+def test_close_before_any_pose_is_ignored(cloth):
+    model, state, control = cloth
+    bank = GripperBank(['left'])
+    bank.request_close('left', True)
+    log = bank.apply(control, state, near(model, state))
+    assert log == [('warning', 'gripper left: close before any pose: ignored')]
+    assert control.grasp_names == [] and bank['left'].close_request is None
+
+
+def test_grasp_follows_the_newest_pose_and_releases(cloth):
+    model, state, control = cloth
+    bank = GripperBank(['left'])
+    corner = state.points_by_id(model, 2)[0]
+    assert bank.set_pose('left', 'world', 'world', corner, (0, 0, 0, 1)) is None
+    bank.request_close('left', True)
+    log = bank.apply(control, state, near(model, state))
+    assert log == [('info', 'gripper left: grasped 1 points')]
+    assert bank['left'].grasping and control.grasp_names == ['left']
+    # a flood: only the newest pose counts at the next tick
+    for z in np.linspace(0.0, 0.3, 50):
+        bank.set_pose('left', 'world', 'world', corner + [0.0, 0.0, z], (0, 0, 0, 1))
+    assert bank.apply(control, state, near(model, state)) == []
+    assert np.allclose(control._grasps['left'].translation, corner + [0.0, 0.0, 0.3])
+    bank.request_close('left', False)
+    bank.apply(control, state, near(model, state))
+    assert not bank['left'].grasping and control.grasp_names == []
+
+
+def test_forget_grasps_keeps_poses_and_drops_commands():
+    bank = GripperBank(['left'])
+    bank.set_pose('left', 'world', 'world', (0, 0, 1), (0, 0, 0, 1))
+    bank.request_close('left', True)
+    bank['left'].grasping = True
+    bank.forget_grasps()
+    g = bank['left']
+    assert (g.grasping, g.close_request, g.pose_pending) == (False, None, False)
+    assert np.allclose(g.translation, [0, 0, 1])
+
+
+def test_points_within_a_radius_or_the_nearest():
+    pts = np.array([[0.0, 0, 0], [0.02, 0, 0], [1.0, 0, 0]])
+    assert points_within(pts, np.zeros(3), 0.03).tolist() == [0, 1]
+    assert points_within(pts, np.array([0.8, 0, 0]), 0.03).tolist() == [2]
+
+
+class FakePublisher:
+    """Counts what it is given; reports a settable number of subscribers."""
+
+    def __init__(self, subscribers=0):
+        self.subscribers = subscribers
+        self.published = []
+
+    def get_subscription_count(self):
+        return self.subscribers
+
+    def publish(self, msg):
+        self.published.append(msg)
+
+
+def test_publisher_packs_the_cloud_only_for_subscribers_and_reuses_markers(cloth):
+    model, state, _ = cloth
+    clouds, markers = FakePublisher(), FakePublisher()
+    out = ClothPublisher(model, 'world', clouds, markers)
+    cloud, marker = out.pack(state, 2, 1, None)
+    assert cloud is None
+    out.publish(cloud, marker)
+    assert clouds.published == [] and markers.published == [marker]
+    clouds.subscribers = 1
+    cloud, again = out.pack(state, 2, 1, None)
+    assert again is marker                      # one marker per level, refilled in place
+    assert len(marker.points) == 3 * 2 * 4 * 4  # level 1: 5 x 5 points
+    assert np.allclose(points_from_pointcloud2(cloud), state.points_by_id(model, 2),
+                       atol=1e-6)
+    assert cloud.header.frame_id == marker.header.frame_id == 'world'
+    assert out.pack(state, 2, 0, None)[1] is not marker
+
+
+def test_runtime_changes_are_checked_against_the_model(cloth):
+    model, _, _ = cloth
+    assert check_change('lod_level', 2, model) is None
+    assert 'out of range 0..2' in check_change('lod_level', 3, model)
+    assert check_change('pinned_points', [-1], model) is None
+    assert check_change('pinned_points', [0, model.point_count - 1], model) is None
+    assert check_change('pinned_points', [0, 81], model) == \
+        'pinned_points [81] out of range 0..80'
+    assert check_change('solver.dt', 0.01, model) is None
+
+
+def test_unknown_overrides_are_named_and_qos_overrides_are_not():
+    known = {p.name for p in params.PARAMS + NODE_PARAMS}
+    given = ['cloth.widht', 'cloth.width', 'qos_overrides./cloth/points.publisher.depth']
+    assert unknown_overrides(given, known) == ['cloth.widht']
+
+
+def test_descriptors_carry_ranges_of_scalars():
+    spec = {p.name: p for p in params.PARAMS + NODE_PARAMS}
+    rate = descriptor(spec['rate_hz'])
+    assert rate.floating_point_range[0].from_value == 1.0 and rate.read_only
+    lod = descriptor(spec['lod_level'])
+    assert lod.integer_range[0].to_value == 9 and not lod.read_only
+    assert not descriptor(spec['scene.ground']).floating_point_range
+
+
+def test_tick_stats_summary_from_made_up_ticks():
+    stats = TickStats(window=100)
+    for i in range(200):
+        t = (i % 100 + 1) * 1e-4
+        stats.add(step=t, pack=t, publish=t, record=0.0, tick=t, levels=3 + i % 2,
+                  sim_time=i / 60)
+    out = stats.summary()
+    assert out['ticks'] == 200 and (out['levels_min'], out['levels_max']) == (3, 4)
+    assert out['tick']['p50'] == pytest.approx(5.05, abs=0.01)    # ms, last 100 ticks
+    assert out['tick']['p99'] == pytest.approx(9.9, abs=0.02)

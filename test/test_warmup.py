@@ -1,0 +1,54 @@
+"""Warm-up and the kernels' cache: what compiles, where it is cached, when it is stale."""
+
+import os
+import shutil
+
+from hcloth_ros.core import kernels
+from hcloth_ros.core.kernels import jit
+from hcloth_ros.core.warmup import kernel_calls
+import numba
+
+
+def test_shares_compile_exactly_the_signatures_the_warm_up_uses():
+    """
+    Check that the compiling processes compile what the warm-up then only loads.
+
+    They use recorded calls; the real warm-up ran once per session (conftest: every
+    solver, both builds with several threads, the energy). Every recorded signature must
+    be one the real calls compiled.
+    """
+    calls = kernel_calls(parallel=numba.get_num_threads() > 1, energy=True)
+    names = {d.py_func.__name__ for d, _ in calls}
+    assert {'eq7_level', 'strain_limit', 'contact', 'conjugate_gradient', 'energy'} <= names
+    for dispatcher, signature in calls:
+        assert signature in dispatcher.overloads, (dispatcher.py_func.__name__, signature)
+
+
+def test_cache_directory_is_keyed_on_every_kernel_source(tmp_path):
+    copy = tmp_path / 'kernels'
+    shutil.copytree(jit.SOURCES, copy, ignore=shutil.ignore_patterns('__pycache__'))
+    assert jit.source_digest(str(copy)) == jit.source_digest()
+    helper = copy / 'springs.py'            # a helper other modules' kernels call
+    helper.write_text(helper.read_text().replace('stretch >= 0.0', 'stretch > 0.0'))
+    assert jit.source_digest(str(copy)) != jit.source_digest()
+    assert jit.CACHE_DIR.endswith(jit.PREFIX + jit.source_digest())
+    # numba caches the kernels there (not beside each source file)
+    for name in ('eq7_level', 'strain_limit', 'force_row'):
+        dispatcher = getattr(kernels.SERIAL, name, None) or getattr(
+            kernels.springs, name)
+        path = dispatcher._cache._cache_path
+        assert os.path.commonpath([path, jit.CACHE_DIR]) == jit.CACHE_DIR, path
+
+
+def test_parallel_builds_are_other_functions_with_their_own_cache_entries():
+    for name in ('eq7_level', 'strain_limit', 'strain_stats', 'system_apply'):
+        serial, parallel = getattr(kernels.SERIAL, name), getattr(kernels.PARALLEL, name)
+        assert serial is not parallel
+        assert parallel.targetoptions.get('parallel') and not serial.targetoptions.get(
+            'parallel')
+        assert (serial._cache._cache_file._index_name
+                != parallel._cache._cache_file._index_name)
+    assert kernels.PARALLEL.prolong is kernels.SERIAL.prolong
+    assert kernels.builds(9, 9, 2) is kernels.SERIAL           # one chunk: no threads
+    assert kernels.builds(257, 257, 1) is kernels.SERIAL
+    assert kernels.builds(257, 257, 2) is kernels.PARALLEL
