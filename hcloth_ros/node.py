@@ -109,8 +109,9 @@ class ClothSimNode(Node):
                   'energy': recording}
         if not kernels_cached(**wanted):
             self.get_logger().info(
-                f'compiling the numba kernels of the {self.solver.name} solver for this '
-                f'machine ({FIRST_START}; later starts load them in under a second)')
+                f'preparing the numba kernels of the {self.solver.name} solver: the first '
+                f'start on a machine compiles them ({FIRST_START}), later starts load them '
+                'in under a second')
         self.get_logger().info(f'numba kernels ready in {warm_up(**wanted):.2f} s, '
                                f'{threads} thread(s)')
         # numba's compiler leaves a large object graph behind; a full collection walking

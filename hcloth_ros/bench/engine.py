@@ -142,7 +142,7 @@ def breakdown(size, steps, warmup):
     names = ['prescribe', 'eq6_first_sweep', 'eq6_second_sweep', 'prolong', 'eq7_level',
              'strain_limit', 'contact', 'strain_stats']
     kits = (kernels.SERIAL, kernels.PARALLEL)
-    originals = {(kit, n): getattr(kit, n) for kit in kits for n in names}
+    originals = {(i, n): getattr(kit, n) for i, kit in enumerate(kits) for n in names}
     current = defaultdict(float)
     sweep_now = {}
 
@@ -165,8 +165,8 @@ def breakdown(size, steps, warmup):
     totals = []
     try:
         for n in names:
-            for kit in kits:
-                setattr(kit, n, wrap(n, originals[kit, n]))
+            for i, kit in enumerate(kits):
+                setattr(kit, n, wrap(n, originals[i, n]))
         for _ in range(steps):
             current.clear()
             sweep_now.clear()
@@ -181,8 +181,8 @@ def breakdown(size, steps, warmup):
             per_step[('python_overhead', -1)].append(totals[-1] - kernel_sum)
     finally:
         for n in names:
-            for kit in kits:
-                setattr(kit, n, originals[kit, n])
+            for i, kit in enumerate(kits):
+                setattr(kit, n, originals[i, n])
     rows = []
     for (name, k), values in sorted(per_step.items(), key=lambda kv: (kv[0][1], kv[0][0])):
         entry = {'kernel': name, 'level': k, 'median_ms': float(np.median(values) * 1e3),

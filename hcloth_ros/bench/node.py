@@ -9,6 +9,14 @@ profile for large clouds in both processes, while a second process subscribes to
 ``cloth/points``. When the node stops it logs its tick statistics (p50/p99 of the solver
 step, message packing, publishing, recording and the whole tick, the real-time factor and
 the levels simulated); this script prints them with the subscriber's receive rate.
+
+    python -m hcloth_ros.bench.node --sizes '' --first-start 3
+
+First start: a subscriber waits for ``cloth/points``, then ``sim_node`` starts on the
+default scene with an empty numba cache (a temporary ``NUMBA_CACHE_DIR``); the figure is
+the time from starting the node's process to the first cloud the subscriber receives
+(imports, compiling the kernels, building the cloth, the first tick), ``--first-start``
+times, then once more with the cache the last run filled.
 """
 
 import argparse
@@ -37,6 +45,47 @@ while time.monotonic() < end:
 span = got[-1] - got[0] if len(got) > 1 else 0.0
 print(f'received {len(got)} {(len(got) - 1) / span if span else 0.0:.2f}')
 """
+
+
+PROBE = """
+import sys, time, rclpy
+from rclpy.qos import qos_profile_sensor_data
+from sensor_msgs.msg import PointCloud2
+rclpy.init()
+node = rclpy.create_node('first_start_probe')
+got = []
+node.create_subscription(PointCloud2, 'cloth/points', lambda m: got.append(time.monotonic()),
+                         qos_profile_sensor_data)
+print('ready', flush=True)
+end = time.monotonic() + float(sys.argv[1])
+while not got and time.monotonic() < end:
+    rclpy.spin_once(node, timeout_sec=0.02)
+print('first', got[0] if got else -1.0, flush=True)
+"""
+
+
+def first_start(cache, timeout=600.0):
+    """
+    Return seconds from starting sim_node to the first cloud a subscriber receives.
+
+    ``cache`` is the ``NUMBA_CACHE_DIR`` the node uses; also returns the node's log.
+    """
+    env = dict(os.environ, ROS_DOMAIN_ID=str(random.randint(100, 200)),
+               PYTHONUNBUFFERED='1', NUMBA_CACHE_DIR=cache)
+    probe = subprocess.Popen([sys.executable, '-c', PROBE, str(timeout)], env=env,
+                             stdout=subprocess.PIPE, text=True)
+    if probe.stdout.readline().strip() != 'ready':
+        raise RuntimeError('the probe subscriber did not start')
+    start = time.monotonic()    # CLOCK_MONOTONIC: the same clock in both processes
+    node = subprocess.Popen([sys.executable, '-m', 'hcloth_ros.node'], env=env,
+                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    first = float(probe.stdout.readline().split()[1])
+    node.send_signal(signal.SIGINT)
+    log, _ = node.communicate(timeout=60)
+    probe.wait(timeout=10)
+    if first < 0:
+        raise RuntimeError(f'no cloud within {timeout} s:\n{log}')
+    return first - start, log
 
 
 def run(levels, seconds, rate, record):
@@ -68,12 +117,33 @@ def run(levels, seconds, rate, record):
     return stats
 
 
+def first_starts(repeats):
+    """Time ``repeats`` first starts on empty caches, then one on the filled cache."""
+    import tempfile
+    cold = []
+    for i in range(repeats):
+        with tempfile.TemporaryDirectory(prefix='hcloth_first_start_') as cache:
+            seconds, log = first_start(cache)
+            cold.append(seconds)
+            print(f'first start {i + 1}/{repeats} (empty cache): first cloud after '
+                  f'{seconds:.1f} s', flush=True)
+            if i == repeats - 1:
+                warm, _ = first_start(cache)
+                print(f'start with the filled cache: first cloud after {warm:.1f} s',
+                      flush=True)
+    notice = [line for line in log.splitlines() if 'preparing' in line or 'ready in' in line]
+    print('\n'.join(f'    {line}' for line in notice), flush=True)
+    return {'cold_s': cold, 'warm_s': warm, 'log': notice}
+
+
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
     parser.add_argument('--sizes', default='16k,65k')
     parser.add_argument('--seconds', type=float, default=10.0)
     parser.add_argument('--rate', type=float, default=60.0)
     parser.add_argument('--record', action='store_true', help='also record to /tmp/*.rrd')
+    parser.add_argument('--first-start', type=int, default=0, metavar='N',
+                        help='also time N first starts on an empty numba cache')
     parser.add_argument('--json', metavar='PATH')
     args = parser.parse_args(argv)
     import numba
@@ -81,7 +151,7 @@ def main(argv=None):
           f'{numba.__version__} (node default numba_threads = 1), load average '
           f'{os.getloadavg()[0]:.2f} on {os.cpu_count()} CPUs', flush=True)
     results = {}
-    for size in args.sizes.split(','):
+    for size in filter(None, args.sizes.split(',')):
         levels = SIZES[size]
         print(f'{size}: running ...', flush=True)
         s = results[size] = run(levels, args.seconds, args.rate, args.record)
@@ -90,6 +160,8 @@ def main(argv=None):
               f'{s["received"]} at {s["receive_hz"]:.1f} Hz', flush=True)
         for phase in ('step', 'pack', 'publish', 'record', 'tick'):
             print(f'    {phase:8s} p50 {s[phase]["p50"]:7.3f} ms   p99 {s[phase]["p99"]:7.3f} ms')
+    if args.first_start:
+        results['first_start'] = first_starts(args.first_start)
     if args.json:
         with open(args.json, 'w') as f:
             json.dump(results, f, indent=2)

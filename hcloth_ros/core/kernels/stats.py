@@ -36,7 +36,7 @@ def _strain_row(q, rest, r, s, magnitude, positive):
         ok = math.isfinite(e)
         finite += ok
         magnitude[i] = abs(e) if ok else 0.0
-        positive[i] = e if (ok and e > 0.0) else 0.0
+        positive[i] = e if ok & (e > 0.0) else 0.0    # &, not `and`: no branch
     return hi - lo, finite
 
 
@@ -52,7 +52,7 @@ def _stats_rows(q, qd, rest, r0, r1, row_max, row_sum, row_count, row_bad):
         for d in range(q.shape[0]):
             x, v = q[d, r], qd[d, r]
             for c in range(cols):
-                bad += not (math.isfinite(x[c]) and math.isfinite(v[c]))
+                bad += not (math.isfinite(x[c]) & math.isfinite(v[c]))
         top = 0             # bit pattern of the largest strain (>= 0.0) so far
         count = 0
         total = 0.0
