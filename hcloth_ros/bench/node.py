@@ -30,37 +30,28 @@ import time
 
 SIZES = {'16k': 5, '65k': 6}
 
+# A subscriber to cloth/points in its own process: `rate SECONDS` counts the clouds for
+# that long and prints how many and how often; `first SECONDS` says 'ready', then prints
+# the monotonic time of the first cloud (-1 if none came).
 SUBSCRIBER = """
 import sys, time, rclpy
 from rclpy.qos import qos_profile_sensor_data
 from sensor_msgs.msg import PointCloud2
+mode, seconds = sys.argv[1], float(sys.argv[2])
 rclpy.init()
 node = rclpy.create_node('bench_subscriber')
 got = []
 node.create_subscription(PointCloud2, 'cloth/points', lambda m: got.append(time.monotonic()),
                          qos_profile_sensor_data)
-end = time.monotonic() + float(sys.argv[1])
-while time.monotonic() < end:
-    rclpy.spin_once(node, timeout_sec=0.05)
-span = got[-1] - got[0] if len(got) > 1 else 0.0
-print(f'received {len(got)} {(len(got) - 1) / span if span else 0.0:.2f}')
-"""
-
-
-PROBE = """
-import sys, time, rclpy
-from rclpy.qos import qos_profile_sensor_data
-from sensor_msgs.msg import PointCloud2
-rclpy.init()
-node = rclpy.create_node('first_start_probe')
-got = []
-node.create_subscription(PointCloud2, 'cloth/points', lambda m: got.append(time.monotonic()),
-                         qos_profile_sensor_data)
 print('ready', flush=True)
-end = time.monotonic() + float(sys.argv[1])
-while not got and time.monotonic() < end:
+end = time.monotonic() + seconds
+while time.monotonic() < end and not (mode == 'first' and got):
     rclpy.spin_once(node, timeout_sec=0.02)
-print('first', got[0] if got else -1.0, flush=True)
+if mode == 'first':
+    print('first', got[0] if got else -1.0, flush=True)
+else:
+    span = got[-1] - got[0] if len(got) > 1 else 0.0
+    print(f'received {len(got)} {(len(got) - 1) / span if span else 0.0:.2f}')
 """
 
 
@@ -72,7 +63,7 @@ def first_start(cache, timeout=600.0):
     """
     env = dict(os.environ, ROS_DOMAIN_ID=str(random.randint(100, 200)),
                PYTHONUNBUFFERED='1', NUMBA_CACHE_DIR=cache)
-    probe = subprocess.Popen([sys.executable, '-c', PROBE, str(timeout)], env=env,
+    probe = subprocess.Popen([sys.executable, '-c', SUBSCRIBER, 'first', str(timeout)], env=env,
                              stdout=subprocess.PIPE, text=True)
     if probe.stdout.readline().strip() != 'ready':
         raise RuntimeError('the probe subscriber did not start')
@@ -101,7 +92,7 @@ def run(levels, seconds, rate, record):
     node = subprocess.Popen(args, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
                             text=True)
     time.sleep(3.0)     # kernels load from the cache, node starts
-    sub = subprocess.run([sys.executable, '-c', SUBSCRIBER, str(seconds)], env=env,
+    sub = subprocess.run([sys.executable, '-c', SUBSCRIBER, 'rate', str(seconds)], env=env,
                          capture_output=True, text=True, timeout=seconds + 60)
     node.send_signal(signal.SIGINT)
     out, _ = node.communicate(timeout=30)
@@ -111,7 +102,7 @@ def run(levels, seconds, rate, record):
             stats = json.loads(line.split('tick stats ', 1)[1])
     if stats is None:
         raise RuntimeError(f'node gave no tick stats:\n{out}')
-    received = sub.stdout.split()
+    received = sub.stdout.split('\n', 1)[1].split()
     stats['received'] = int(received[1])
     stats['receive_hz'] = float(received[2])
     return stats
