@@ -272,6 +272,9 @@ def test_explicit_step(rows, cols):
     kernels.explicit_step(*args, *outs)
     for name, got, want in zip(('q', 'qd', 'dv'), outs, expected):
         close(got, want, f'explicit {name}')
+    # held points take their prescribed change, bit for bit
+    held = lv['kind'] != 0
+    assert held.any() and np.array_equal(outs[2][:, held], lv['presc'][:, held])
 
 
 @BUILDS

@@ -52,3 +52,7 @@ def test_parallel_builds_are_other_functions_with_their_own_cache_entries():
     assert kernels.builds(9, 9, 2) is kernels.SERIAL           # one chunk: no threads
     assert kernels.builds(257, 257, 1) is kernels.SERIAL
     assert kernels.builds(257, 257, 2) is kernels.PARALLEL
+    for rows, cols in ((45, 45), (46, 45), (32, 64), (31, 66), (2048, 1)):
+        # the pure-Python choice agrees with the kernels' own chunking
+        assert (kernels.builds(rows, cols, 2) is kernels.PARALLEL) == (
+            kernels.chunk_count(rows, cols) > 1), (rows, cols)

@@ -103,6 +103,8 @@ class Solver:
         self._builds = {'serial': kernels.SERIAL, 'parallel': kernels.PARALLEL}.get(
             builds, builds) if isinstance(builds, str) else builds
         self.model = model
+        self._threads = None    # the kernel sets per level follow numba's thread count
+        self._use_threads(numba.get_num_threads())
         self.literal = external == 'literal'
         self.external = external
         self.strain_limit = strain_limit
@@ -140,10 +142,14 @@ class Solver:
         Parallel only with several numba threads and a level large enough to split
         (:func:`kernels.builds`), unless the solver was built with ``builds``.
         """
-        if self._builds is not None:
-            return self._builds
-        lv = self.model.level(k)
-        return kernels.builds(lv.rows, lv.cols, self._threads)
+        return self._kits[k]
+
+    def _use_threads(self, threads):
+        """Pick each level's kernel set for ``threads`` numba threads (once per change)."""
+        if threads != self._threads:
+            self._threads = threads
+            self._kits = [self._builds or kernels.builds(lv.rows, lv.cols, threads)
+                          for lv in self.model.levels]
 
     def dinv(self, k, h):
         """``1 / (m_i + h^2 K_i)`` of level k, cached per step size."""
@@ -179,7 +185,7 @@ class Solver:
         if not (np.isfinite(dt) and 0.0 < dt <= 1.0):
             return StepReport(False, f'dt must be in (0, 1] s, got {dt}')
         h = float(dt)
-        self._threads = numba.get_num_threads()
+        self._use_threads(numba.get_num_threads())
         levels = self.levels()
         self._extra = {}
         for k in levels:

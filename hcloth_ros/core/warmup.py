@@ -18,7 +18,7 @@ from hcloth_ros.core import kernels
 from hcloth_ros.core.control import Control
 from hcloth_ros.core.model import ClothBuilder
 from hcloth_ros.core.scene import make_scene
-from hcloth_ros.core.solvers import make_solver, prolong_state, SOLVERS
+from hcloth_ros.core.solvers import make_solver, SOLVERS
 from hcloth_ros.core.state import State
 import numba
 
@@ -44,27 +44,23 @@ def _exercise(model, solvers, parallel, energy, builds=None):
     """
     Make every kernel call the configuration makes.
 
-    One step of each solver (and build), the energy, a level restart.
-    ``builds(name)`` overrides the kernel sets.
+    One step of each solver (and build), the energy, a level restart. ``builds`` maps
+    ``'serial'`` and ``'parallel'`` to the kernel sets (default :mod:`kernels`' own).
     """
+    builds = builds or {'serial': kernels.SERIAL, 'parallel': kernels.PARALLEL}
     for name in SOLVERS if solvers is None else solvers:
         for build in ('serial', 'parallel') if parallel else ('serial',):
             state = State.at_rest(model)
             control = Control(model)
             control.pin([0])
             control.set_target(2, (1.0, 0.0, 1.0), state)
-            solver = make_solver(name, model, builds=build if builds is None else builds(build))
-            solver.step(state, control, 1e-3)
+            make_solver(name, model, builds=builds[build]).step(state, control, 1e-3)
     state = State.at_rest(model)
-    lv = model.level(0)
-    kit = kernels.SERIAL if builds is None else builds('serial')
+    lv, kit = model.level(0), builds['serial']
     if energy:
         kit.energy(state.q[0], state.qd[0], lv.mass, lv.rest, lv.stiffness, lv.contraction,
                    model.gravity)
-    if builds is None:
-        prolong_state(state, 1)
-    else:
-        kit.prolong(state.q[0], state.q[1])
+    kit.prolong(state.q[0], state.q[1])     # as prolong_state restarts a level
 
 
 class _Recorder:
@@ -95,7 +91,7 @@ def kernel_calls(solvers=None, parallel=None, energy=True):
     calls = []
     sets = {'serial': _Recorder(kernels.SERIAL, calls),
             'parallel': _Recorder(kernels.PARALLEL, calls)}
-    _exercise(_tiny_model(), solvers, parallel, energy, builds=sets.__getitem__)
+    _exercise(_tiny_model(), solvers, parallel, energy, builds=sets)
     unique = {}
     for dispatcher, args in calls:
         signature = tuple(numba.typeof(a) for a in args)

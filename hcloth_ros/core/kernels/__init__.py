@@ -83,9 +83,10 @@ def builds(rows, cols, threads):
     """
     Return the kernel set for a level of ``rows x cols`` points and ``threads`` threads.
 
-    The parallel builds only where they split the level among threads.
+    The parallel builds only where they split the level among threads: with more than one
+    thread, on levels ``chunk_count`` splits (those of ``PAR_MIN_POINTS`` points or more).
     """
-    return PARALLEL if threads > 1 and chunk_count(rows, cols) > 1 else SERIAL
+    return PARALLEL if threads > 1 and rows * cols >= PAR_MIN_POINTS else SERIAL
 
 
 __all__ = ['builds', 'chunk_count', 'contact', 'conjugate_gradient',
