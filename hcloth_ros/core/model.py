@@ -87,10 +87,12 @@ class ClothModel:
     :ivar intro_level: int64 ``(point_count,)``: the level that inserts each id.
     :ivar total_mass: kg, the same at every level.
     :ivar gravity: m/s^2, shape ``(3,)``.
+    :ivar air_drag: drag force per unit area and unit velocity (N s/m^3).
+    :ivar spring_damping: damping of every spring along its direction (N s/m).
     """
 
     def __init__(self, width, height, placement, levels, parents, intro_level,
-                 total_mass, gravity, scene):
+                 total_mass, gravity, scene, air_drag=0.0, spring_damping=0.0):
         self.width = float(width)
         self.height = float(height)
         self.placement = placement
@@ -102,6 +104,8 @@ class ClothModel:
         self.total_mass = float(total_mass)
         self.gravity = gravity
         self.scene = scene
+        self.air_drag = float(air_drag)
+        self.spring_damping = float(spring_damping)
         for array in (self.parents, self.intro_level, self.gravity):
             array.setflags(write=False)
 
@@ -136,6 +140,10 @@ class ClothModel:
         d = a + lv.cols
         e = d + 1
         return np.stack([np.stack([a, e, b], 1), np.stack([a, d, e], 1)], 1).reshape(-1, 3)
+
+    def area_share(self, k):
+        """Each level-k point's share of the cloth's area (m^2), shape ``(rows, cols)``."""
+        return self.level(k).mass * (self.width * self.height / self.total_mass)
 
     def ids_at(self, k):
         """Ids of level k's points in grid order, shape ``(rows * cols,)``."""
@@ -253,12 +261,16 @@ class ClothBuilder:
     :param placement: :class:`Placement` of the rectangle at t = 0.
     :param gravity: m/s^2.
     :param scene: a :class:`hcloth_ros.core.scene.Scene` of static obstacles, or None.
+    :param air_drag: air drag per unit area: a point moving at v feels
+        ``-air_drag * area * v`` (N s/m^3; 0 = none). Read by the ``multigrid`` solver.
+    :param spring_damping: every spring resists the rate of change of its length with
+        this coefficient (N s/m; 0 = none). Read by the ``multigrid`` solver.
     """
 
     def __init__(self, width=1.0, height=1.0, resolution=(9, 9), level_count=3,
                  total_mass=0.2, k_struct=1000.0, k_shear=1000.0, k_bend=100.0,
                  stiffness_scale=None, contraction=None, placement=None,
-                 gravity=(0.0, 0.0, -9.81), scene=None):
+                 gravity=(0.0, 0.0, -9.81), scene=None, air_drag=0.0, spring_damping=0.0):
         self.width = width
         self.height = height
         self.resolution = tuple(int(n) for n in np.broadcast_to(resolution, (2,)))
@@ -270,6 +282,8 @@ class ClothBuilder:
         self.placement = placement or Placement()
         self.gravity = gravity
         self.scene = scene
+        self.air_drag = air_drag
+        self.spring_damping = spring_damping
 
     def _per_level(self, values, name, default, low, high):
         if values is None:
@@ -297,6 +311,10 @@ class ClothBuilder:
         if any(not (np.isfinite(k) and k >= 0) for k in self.k) or self.k[0] <= 0:
             raise ValueError(f'stiffness must be finite, non-negative and structural > 0, '
                              f'got {self.k}')
+        for name in ('air_drag', 'spring_damping'):
+            value = getattr(self, name)
+            if not (np.isfinite(value) and 0.0 <= value <= 1e6):
+                raise ValueError(f'{name} must be in [0, 1e6], got {value}')
         au = np.asarray(self.placement.axis_u, float)
         av = np.asarray(self.placement.axis_v, float)
         if (abs(np.linalg.norm(au) - 1) > 1e-9 or abs(np.linalg.norm(av) - 1) > 1e-9
@@ -337,4 +355,4 @@ class ClothBuilder:
                                 **arrays))
         return ClothModel(self.width, self.height, self.placement, levels, parents, intro,
                           self.total_mass, np.asarray(self.gravity, dtype=np.float64),
-                          self.scene)
+                          self.scene, self.air_drag, self.spring_damping)

@@ -163,13 +163,18 @@ class Solver:
         self.kernels(k).prescribe(state.q[k], state.qd[k], holds.kind, holds.drive_index,
                                   holds.drive_target, h, self._presc[k])
 
+    def _strain_limit(self, refinement):
+        """Return a level's strain limit (``refinement``: its inherited points are fixed)."""
+        return self.strain_limit
+
     def _post(self, k, state, holds, h, inherited_fixed):
         """Strain limiting, then contact: no point ends the step inside an obstacle."""
         lv, kit = self.model.level(k), self.kernels(k)
-        if self.strain_limit is not None:
+        limit = self._strain_limit(inherited_fixed)
+        if limit is not None:
             sweeps = kit.strain_limit(
                 self._q[k], self._qd[k], self._dv[k], lv.rest, holds.kind, inherited_fixed,
-                self.strain_limit,
+                limit,
                 self.strain_refine_iterations if inherited_fixed else self.strain_iterations,
                 self.strain_tolerance, h, self._scratch[k])
             self._extra[f'strain_sweeps_{k}'] = sweeps
@@ -313,13 +318,17 @@ class HierarchicalSolver(Solver):
             _eq6(self, 0, state, holds, h)
             self._post(0, state, holds, h, False)
             return
+        self._eq7(k, state, holds, h)
+        self._post(k, state, holds, h, True)
+
+    def _eq7(self, k, state, holds, h):
+        """Prolong level k-1's velocity change, then constraint C and eq. 7 on level k."""
         lv, kit = self.model.level(k), self.kernels(k)
         kit.prolong(self._dv[k - 1], self._dv_app[k])
         kit.eq7_level(state.q[k], state.qd[k], lv.mass, lv.rest, lv.stiffness, lv.contraction,
                       self.dinv(k, h), holds.kind, self._presc[k], h, self.model.gravity,
                       self.literal, self._q[k - 1], self._qd[k - 1], self._dv[k - 1],
                       self._dv_app[k], self._q[k], self._qd[k], self._dv[k])
-        self._post(k, state, holds, h, True)
 
 
 class ImplicitSolver(_SingleLevel):
@@ -419,8 +428,12 @@ def _newton_done(change, previous, tolerance):
     return change * max(1.0, rho / (1.0 - rho)) < tolerance
 
 
+# the multigrid solver builds on HierarchicalSolver, so its module imports this one: it
+# comes last (the package imports this module first, whichever module a user imports)
+from hcloth_ros.core.multigrid_solver import MultigridSolver  # noqa: E402, I100
+
 SOLVERS = {cls.name: cls for cls in
-           (ExplicitSolver, ApproxSolver, HierarchicalSolver, ImplicitSolver)}
+           (ExplicitSolver, ApproxSolver, HierarchicalSolver, ImplicitSolver, MultigridSolver)}
 
 
 def make_solver(name, model, **options):

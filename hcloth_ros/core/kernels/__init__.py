@@ -52,6 +52,8 @@ from types import SimpleNamespace
 from hcloth_ros.core.kernels.jit import keyed_cache
 
 with keyed_cache():
+    from hcloth_ros.core.kernels.bdf2 import (anchor, new_positions, newton_residual,
+                                              start_velocity)
     from hcloth_ros.core.kernels.contact import contact
     from hcloth_ros.core.kernels.eq6 import eq6_first_sweep, eq6_second_sweep
     from hcloth_ros.core.kernels.eq7 import eq7_level, eq7_level_parallel, prolong
@@ -64,14 +66,16 @@ with keyed_cache():
     from hcloth_ros.core.kernels.layout import (chunk_count, DRIVEN, FREE, PAR_MIN_POINTS,
                                                 PINNED, STENCIL_DC, STENCIL_DR,
                                                 STENCIL_SIZE)
+    from hcloth_ros.core.kernels.multigrid import assemble_hierarchy, inject, multigrid_cg
     from hcloth_ros.core.kernels.stats import energy, strain_stats, strain_stats_parallel
     from hcloth_ros.core.kernels.strain import (excess_threshold, strain_limit,
                                                 strain_limit_parallel)
 
-KERNELS = ('contact', 'conjugate_gradient', 'energy', 'eq6_first_sweep', 'eq6_second_sweep',
-           'eq7_level', 'excess_threshold', 'explicit_step', 'prescribe', 'prolong',
-           'spring_forces', 'strain_limit', 'strain_stats', 'system_apply',
-           'system_diagonal')
+KERNELS = ('anchor', 'assemble_hierarchy', 'contact', 'conjugate_gradient', 'energy',
+           'eq6_first_sweep', 'eq6_second_sweep', 'eq7_level', 'excess_threshold',
+           'explicit_step', 'inject', 'multigrid_cg', 'new_positions', 'newton_residual',
+           'prescribe', 'prolong', 'spring_forces', 'start_velocity', 'strain_limit',
+           'strain_stats', 'system_apply', 'system_diagonal')
 # Every kernel by name: SERIAL holds the serial builds, PARALLEL the parallel builds of
 # those that have one (jit.serial_and_parallel) and the serial build of the others.
 SERIAL = SimpleNamespace(**{name: globals()[name] for name in KERNELS})
@@ -89,10 +93,11 @@ def builds(rows, cols, threads):
     return PARALLEL if threads > 1 and rows * cols >= PAR_MIN_POINTS else SERIAL
 
 
-__all__ = ['builds', 'chunk_count', 'contact', 'conjugate_gradient',
-           'conjugate_gradient_parallel', 'DRIVEN', 'energy', 'eq6_first_sweep',
+__all__ = ['anchor', 'assemble_hierarchy', 'builds', 'chunk_count', 'conjugate_gradient',
+           'conjugate_gradient_parallel', 'contact', 'DRIVEN', 'energy', 'eq6_first_sweep',
            'eq6_second_sweep', 'eq7_level', 'eq7_level_parallel', 'excess_threshold',
-           'explicit_step', 'FREE', 'KERNELS', 'PAR_MIN_POINTS', 'PARALLEL', 'PINNED',
-           'prescribe', 'prolong', 'SERIAL', 'spring_forces', 'STENCIL_DC', 'STENCIL_DR',
-           'STENCIL_SIZE', 'strain_limit', 'strain_limit_parallel', 'strain_stats',
-           'strain_stats_parallel', 'system_apply', 'system_apply_parallel', 'system_diagonal']
+           'explicit_step', 'FREE', 'inject', 'KERNELS', 'multigrid_cg', 'new_positions',
+           'newton_residual', 'PAR_MIN_POINTS', 'PARALLEL', 'PINNED', 'prescribe', 'prolong',
+           'SERIAL', 'spring_forces', 'start_velocity', 'STENCIL_DC', 'STENCIL_DR', 'STENCIL_SIZE',
+           'strain_limit', 'strain_limit_parallel', 'strain_stats', 'strain_stats_parallel',
+           'system_apply', 'system_apply_parallel', 'system_diagonal']

@@ -1,0 +1,289 @@
+"""
+The ``multigrid`` solver: BDF2 with a few Newton iterations, multigrid-preconditioned CG.
+
+The hierarchy as a solver, not only a filter. Up to its ``accurate_level`` the cloth steps
+by an implicit integrator of the full spring model (:mod:`.kernels.bdf2`): BDF2 by default
+(second order, A-stable; the first step after a start, a reset or a jump of the state is
+backward Euler), or backward Euler throughout. Each step runs a fixed number of Newton
+iterations from an extrapolated first guess; each Newton iteration solves its linear
+system by CG preconditioned with a V-cycle over the levels ``0 .. accurate_level``
+(:mod:`.kernels.multigrid`), also for a fixed most number of iterations. So a step costs
+the same every time, and the levels the V-cycle needs are the model's own.
+
+Levels finer than ``accurate_level`` follow the paper's Table 1 (constraint C and
+eq. 7) from the accurate level's velocity change: large-scale motion from the accurate
+solve, detail from the cheap refinement. Levels coarser than it are the accurate level's
+own points (injection), so every level is a complete mesh after every step.
+
+Material damping (air drag, spring damping) comes from the model; with none, how fast a
+cloth settles is BDF2's own small numerical damping.
+"""
+
+from hcloth_ros.core.kernels.layout import FREE
+from hcloth_ros.core.model import ClothBuilder
+from hcloth_ros.core.solvers import HierarchicalSolver
+import numpy as np
+
+INTEGRATORS = ('bdf2', 'backward_euler')
+
+
+def _grids_below(model, smallest=3):
+    """
+    Coarser grids below level 0 for the V-cycle, coarse to fine (model levels of their own).
+
+    Level 0 is halved while both sides stay odd and above ``smallest`` points, with level
+    0's springs and contraction and the same cloth: a V-cycle that ends on a grid of a few
+    points corrects the cloth's largest motions almost exactly, at almost no cost (on the
+    33 x 33 swing a V-cycle ending at 9 x 9 after 8 block-Jacobi sweeps left the first
+    second 3x further from the reference than one ending at 3 x 3).
+    """
+    lv0 = model.level(0)
+    rows, cols, count = lv0.rows, lv0.cols, 0
+    while (rows - 1) % 2 == 0 and (cols - 1) % 2 == 0 and min(rows, cols) > smallest:
+        rows, cols, count = (rows - 1) // 2 + 1, (cols - 1) // 2 + 1, count + 1
+    if count == 0:
+        return []
+    return list(ClothBuilder(
+        width=model.width, height=model.height, resolution=(cols, rows), level_count=count,
+        total_mass=model.total_mass, k_struct=lv0.stiffness[0], k_shear=lv0.stiffness[4],
+        k_bend=lv0.stiffness[8], contraction=[lv0.contraction] * count).finalize().levels)
+
+
+class _Hierarchy:
+    """Flat buffers of the V-cycle's grids (below level 0, then levels ``0 .. top``)."""
+
+    def __init__(self, model, top):
+        levels = _grids_below(model) + [model.level(k) for k in range(top + 1)]
+        sizes = [lv.rows * lv.cols for lv in levels]
+        self.shapes = np.array([[lv.rows, lv.cols] for lv in levels], dtype=np.int64)
+        self.offsets = np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
+        total = int(self.offsets[-1])
+        self.base_mass = np.concatenate([lv.mass.ravel() for lv in levels])
+        self.air_drag = self.base_mass * (model.air_drag * model.width * model.height
+                                          / model.total_mass)
+        self.rest = np.array([lv.rest for lv in levels])
+        self.stiffness = np.array([lv.stiffness for lv in levels])
+        self.contraction = np.array([lv.contraction for lv in levels])
+        self.free = np.ones(total)
+        self.positions = np.zeros(3 * total)
+        self.mass = np.zeros(total)
+        self.coef_uu = np.zeros(6 * total)
+        self.coef_iso = np.zeros(6 * total)
+        self.directions = np.zeros(18 * total)
+        self.block_inverse = np.zeros(6 * total)
+        self.mg = [np.zeros(3 * total) for _ in range(3)]
+        shape = (3, levels[-1].rows, levels[-1].cols)
+        # finest-level vectors: v+, held targets, -R, the correction, CG's r, z, p, Ap
+        (self.v, self.target, self.rhs, self.correction, self.r, self.z, self.p,
+         self.ap) = (np.zeros(shape) for _ in range(8))
+
+    def top_air_drag(self):
+        """Air drag per point of the top level (N s/m), ``(rows, cols)``."""
+        rows, cols = self.shapes[-1]
+        return self.air_drag[self.offsets[-2]:].reshape(rows, cols)
+
+    def set_holds(self, kind):
+        """Mark the top level's free points (the coarser grids follow by injection)."""
+        np.copyto(self.free[self.offsets[-2]:], (kind == FREE).ravel())
+
+
+class MultigridSolver(HierarchicalSolver):
+    """
+    BDF2 (or backward Euler) up to ``accurate_level``, Newton with multigrid-PCG.
+
+    :param integrator: ``'bdf2'`` or ``'backward_euler'``.
+    :param accurate_level: the finest level solved by the integrator (default: the finest
+        level); finer ones are refined by eq. 7.
+    :param newton_iterations: Newton iterations per step (fixed).
+    :param cg_iterations: most PCG iterations per Newton iteration.
+    :param cg_rtol: PCG stops earlier once the residual fell by this factor.
+    :param smoothing_sweeps: block-Jacobi sweeps before and after each coarse correction.
+    :param coarse_sweeps: block-Jacobi sweeps on level 0.
+    :param omega: damping of the block-Jacobi sweeps.
+    :param refresh_matrix: assemble the Newton matrix at every Newton iteration (True) or
+        once per step at the first guess (False: cheaper, converges more slowly).
+    :param strain_limit: strain limiting on the solved level, off by default: its springs
+        hold the cloth on their own.
+    :param refine_strain_limit: strain limiting on the refinement levels (eq. 7 alone lets
+        their springs stretch: 30 % within half a second of the swing).
+    :param options: those of :class:`~hcloth_ros.core.solvers.HierarchicalSolver`.
+
+    Refinement levels run eq. 7 as :class:`HierarchicalSolver` does (backward-Euler form,
+    from ``x_n``, ``v_n`` with step h), then their inserted points move by the prolonged
+    difference between the coarser level's displacement and ``h`` times its new velocity:
+    BDF2 moves a point by ``x^ - x_n + beta v+``, not ``h v+``, and without this an inserted
+    point drifts from the points it lies between (``h^2 g / 3`` a step under gravity,
+    100 % strain within 2 s). Eq. 7 from the BDF2 anchor instead blows up: one Jacobi
+    step is not the converged solve BDF2's stability needs.
+    """
+
+    name = 'multigrid'
+
+    def __init__(self, model, integrator='bdf2', accurate_level=None, newton_iterations=3,
+                 cg_iterations=4, cg_rtol=1e-3, smoothing_sweeps=2, coarse_sweeps=8,
+                 omega=0.67, refresh_matrix=True, strain_limit=None, refine_strain_limit=0.1,
+                 **options):
+        super().__init__(model, strain_limit=strain_limit, **options)
+        if refine_strain_limit is not None and not 0.0 < refine_strain_limit < 10.0:
+            raise ValueError('refine_strain_limit must be in (0, 10) or None, '
+                             f'got {refine_strain_limit}')
+        self.refine_strain_limit = refine_strain_limit
+        if integrator not in INTEGRATORS:
+            raise ValueError(f'integrator must be one of {INTEGRATORS}, got {integrator!r}')
+        top = model.level_count - 1
+        self.accurate_level = top if accurate_level is None else int(accurate_level)
+        if not 0 <= self.accurate_level <= top:
+            raise ValueError(f'accurate_level must be in 0..{top}, got {accurate_level}')
+        for name, value, high in (('newton_iterations', newton_iterations, 100),
+                                  ('cg_iterations', cg_iterations, 10000),
+                                  ('smoothing_sweeps', smoothing_sweeps, 100),
+                                  ('coarse_sweeps', coarse_sweeps, 1000)):
+            if not 1 <= int(value) <= high:
+                raise ValueError(f'{name} must be in 1..{high}, got {value}')
+        if not 0.0 < cg_rtol < 1.0:
+            raise ValueError(f'cg_rtol must be in (0, 1), got {cg_rtol}')
+        if not 0.0 < omega <= 1.0:
+            raise ValueError(f'omega must be in (0, 1], got {omega}')
+        self.integrator = integrator
+        self.newton_iterations = int(newton_iterations)
+        self.cg_iterations = int(cg_iterations)
+        self.cg_rtol = float(cg_rtol)
+        self.smoothing_sweeps = int(smoothing_sweeps)
+        self.coarse_sweeps = int(coarse_sweeps)
+        self.omega = float(omega)
+        self.refresh_matrix = bool(refresh_matrix)
+        self._hierarchies = {}
+        # per level: the anchor of the step, and BDF2's history (the state before the
+        # last step and after it)
+        self._x_hat = [np.zeros_like(q) for q in self._q]
+        self._v_hat = [np.zeros_like(q) for q in self._q]
+        self._previous = [(np.zeros_like(q), np.zeros_like(q)) for q in self._q]
+        self._current = [(np.zeros_like(q), np.zeros_like(q)) for q in self._q]
+        self._history_key = None
+        self._beta = None
+
+    def _strain_limit(self, refinement):
+        return self.refine_strain_limit if refinement else self.strain_limit
+
+    def solved_level(self):
+        """Return the level the integrator solves: the accurate one, or the finest."""
+        return min(self.accurate_level, self.finest_level)
+
+    def _hierarchy(self, top):
+        if top not in self._hierarchies:
+            self._hierarchies[top] = _Hierarchy(self.model, top)
+        return self._hierarchies[top]
+
+    def _has_history(self, state, key, levels):
+        """Whether the last accepted step of this solver led to ``state`` (BDF2 may go on)."""
+        return self._history_key == key and all(
+            np.array_equal(self._current[k][0], state.q[k])
+            and np.array_equal(self._current[k][1], state.qd[k]) for k in levels)
+
+    def step(self, state, control, dt):
+        """Advance ``state`` by ``dt`` (see :meth:`Solver.step`); keeps BDF2's history."""
+        self._control = control
+        h = float(dt)
+        top = self.solved_level()
+        own = [top]     # the level with an anchor and a history
+        key = (h, self.integrator, self.finest_level, state.time)
+        history = self.integrator == 'bdf2' and self._has_history(state, key, own)
+        if not history:
+            # a start, a reset, another step size or an edited state: backward Euler
+            self._history_key = None
+            for k in own:
+                np.copyto(self._current[k][0], state.q[k])
+                np.copyto(self._current[k][1], state.qd[k])
+        self._beta = 2.0 * h / 3.0 if history else h
+        for k in own:
+            self.kernels(k).anchor(state.q[k], state.qd[k], self._previous[k][0],
+                                   self._previous[k][1], history,
+                                   control.holds(k).kind, self._x_hat[k], self._v_hat[k])
+        report = super().step(state, control, dt)
+        if report.ok:
+            for k in own:
+                self._previous[k], self._current[k] = self._current[k], self._previous[k]
+                np.copyto(self._current[k][0], state.q[k])
+                np.copyto(self._current[k][1], state.qd[k])
+            self._history_key = (h, self.integrator, self.finest_level, state.time)
+        report.newton_iterations = self.newton_iterations
+        report.cg_iterations = report.extra.get('cg_iterations', 0)
+        return report
+
+    def _prescribe(self, k, state, holds, h):
+        """Held points' change: from the anchor over beta on the solved level."""
+        top = self.solved_level()
+        if k == top:
+            self.kernels(k).prescribe(self._x_hat[k], self._v_hat[k], holds.kind,
+                                      holds.drive_index, holds.drive_target, self._beta,
+                                      self._presc[k])
+        elif k > top:
+            super()._prescribe(k, state, holds, h)
+
+    def _integrate(self, k, state, holds, h):
+        top, beta = self.solved_level(), self._beta
+        if k > top:
+            self._refine(k, state, holds, h)
+            return
+        if k > 0:
+            return      # written with level 0 below
+        holds_top = holds if top == 0 else self._control.holds(top)
+        self._prescribe(top, state, holds_top, h)
+        self._solve(top, holds_top, h, beta)
+        self._post(top, state, holds_top, beta, False)
+        kit = self.kernels(top)
+        for level in range(top - 1, -1, -1):
+            for arrays in (self._q, self._qd, self._dv):
+                kit.inject(arrays[level + 1], arrays[level])
+
+    def _refine(self, k, state, holds, h):
+        """Table 1 on level k (constraint C, eq. 7), the displacement correction, then post."""
+        self._eq7(k, state, holds, h)
+        # what the coarser level moved beyond h v+, prolonged onto the inserted points
+        drift, fine = self._scratch[k - 1], self._scratch[k]
+        np.subtract(self._q[k - 1], state.q[k - 1], out=drift)
+        drift -= h * self._qd[k - 1]
+        self.kernels(k).prolong(drift, fine)
+        fine[:, ::2, ::2] = 0.0
+        self._q[k] += fine
+        self._post(k, state, holds, h, True)
+
+    def _solve(self, top, holds, h, beta):
+        """
+        Take the implicit step of level ``top`` into ``_q``, ``_qd`` and ``_dv`` (``v+ - v_n``).
+
+        A fixed number of Newton iterations, each one multigrid-PCG solve.
+        """
+        hier = self._hierarchy(top)
+        kit, lv, g = self.kernels(top), self.model.level(top), self.model.gravity
+        hier.set_holds(holds.kind)
+        x_hat, v_hat, presc = self._x_hat[top], self._v_hat[top], self._presc[top]
+        np.add(v_hat, presc, out=hier.target)       # on held points: x^ + beta v+
+        hier.target *= beta
+        hier.target += x_hat
+        v, x_new = hier.v, self._q[top]
+        kit.start_velocity(self._current[top][1], h, g, v_hat, presc, holds.kind, v)
+        cg_total = 0
+        for newton in range(self.newton_iterations):
+            kit.newton_residual(x_hat, v_hat, v, hier.target, holds.kind, beta, lv.mass,
+                                hier.top_air_drag(), lv.rest, lv.stiffness, lv.contraction,
+                                self.model.spring_damping, g, x_new, hier.rhs)
+            if newton == 0 or self.refresh_matrix:
+                kit.assemble_hierarchy(x_new, hier.shapes, hier.offsets, hier.rest,
+                                       hier.stiffness, hier.contraction,
+                                       self.model.spring_damping, beta, hier.base_mass,
+                                       hier.air_drag, hier.positions, hier.mass,
+                                       hier.coef_uu, hier.coef_iso, hier.directions,
+                                       hier.block_inverse, hier.free)
+            iterations, _ = kit.multigrid_cg(
+                hier.shapes, hier.offsets, hier.mass, hier.free, hier.coef_uu, hier.coef_iso,
+                hier.directions, hier.block_inverse, hier.rhs, self.cg_iterations,
+                self.cg_rtol, self.smoothing_sweeps, self.coarse_sweeps, self.omega,
+                hier.mg[0], hier.mg[1], hier.mg[2], hier.r, hier.z, hier.p, hier.ap,
+                hier.correction)
+            cg_total += iterations
+            v += hier.correction
+        kit.new_positions(x_hat, v, hier.target, holds.kind, beta, x_new)
+        np.copyto(self._qd[top], v)
+        np.subtract(v, self._current[top][1], out=self._dv[top])     # v+ - v_n
+        self._extra['cg_iterations'] = cg_total
