@@ -37,7 +37,8 @@ nests them (a level-k-1 point is the level-k point at twice its row and column):
 * coarse operators: each coarser level's own springs evaluated at the fine positions
   injected (re-discretised, not Galerkin ``P^T A P``: as cheap as one fine assembly, and a
   good enough preconditioner even though it is a poor solver on its own);
-* the coarsest level: ``coarse_sweeps`` more block-Jacobi sweeps.
+* the coarsest grid: solved exactly (dense Cholesky, :func:`coarse_cholesky`) when it has
+  at most ``DENSE_MAX_POINTS`` points, else ``coarse_sweeps`` block-Jacobi sweeps.
 
 The same number of sweeps before and after the coarse correction and a Jacobi smoother
 make the V-cycle a symmetric linear operator, as CG needs.
@@ -54,9 +55,12 @@ from hcloth_ros.core.kernels.layout import interleaved_dot, row3, STENCIL_DC, ST
     stencil_span
 from hcloth_ros.core.kernels.springs import spring_vector
 import numba
+import numpy as np
 
 # Per-point entries of the symmetric inverse diagonal block: xx, yy, zz, xy, xz, yz.
 BLOCK = 6
+# Largest coarsest grid solved by dense Cholesky (75 unknowns: about 0.1 M operations).
+DENSE_MAX_POINTS = 25
 
 
 @numba.njit(**JIT)
@@ -318,6 +322,84 @@ def inject(fine, coarse):
 
 
 @numba.njit(**JIT)
+def coarse_cholesky(mass, free, coef_uu, coef_iso, directions, factor):
+    """
+    Assemble the coarsest grid's ``A`` densely and factor it, ``A = L L^T``, in place.
+
+    ``factor`` is ``(3 n, 3 n)``, unknown ``3 i + d`` for point i and component d; held
+    points get identity rows and columns. Block-Jacobi sweeps cannot stand in for this
+    solve: the coarsest grid's smallest eigenvalues belong to the cloth's translations
+    (mass only, the springs do not resist them), which a sweep reduces by about 1 - m/D,
+    about 2 % here, and the error left shows as momentum the springs did not make.
+    """
+    rows, cols = mass.shape
+    n = rows * cols
+    m, fr = mass.reshape(n), free.reshape(n)
+    size = 3 * n
+    for i in range(size):
+        for j in range(size):
+            factor[i, j] = 0.0
+    for i in range(n):
+        for d in range(3):
+            factor[3 * i + d, 3 * i + d] = m[i]
+    for s in range(2 * coef_uu.shape[0]):
+        lo, hi, off, src = _direction_span(s, rows, cols)
+        a, c_iso, ux, uy, uz = _springs_of(coef_uu, coef_iso, directions, s, lo + src,
+                                           hi + src)
+        for k in range(hi - lo):
+            i, j = lo + k, lo + k + off
+            u = (ux[k], uy[k], uz[k])
+            for d in range(3):
+                for e in range(3):
+                    block = a[k] * u[d] * u[e] + (c_iso[k] if d == e else 0.0)
+                    factor[3 * i + d, 3 * i + e] += block
+                    factor[3 * i + d, 3 * j + e] -= block
+    for i in range(n):
+        if fr[i] == 0.0:
+            for d in range(3):
+                for j in range(size):
+                    factor[3 * i + d, j] = 0.0
+                    factor[j, 3 * i + d] = 0.0
+                factor[3 * i + d, 3 * i + d] = 1.0
+    for j in range(size):           # Cholesky, column by column
+        total = factor[j, j]
+        for k in range(j):
+            total -= factor[j, k] * factor[j, k]
+        factor[j, j] = math.sqrt(total)
+        for i in range(j + 1, size):
+            total = factor[i, j]
+            for k in range(j):
+                total -= factor[i, k] * factor[j, k]
+            factor[i, j] = total / factor[j, j]
+
+
+@numba.njit(**JIT)
+def coarse_solve(factor, b, x):
+    """Solve ``L L^T x = b`` on the coarsest grid (``b``, ``x``: ``(3, rows, cols)``)."""
+    n = b.shape[1] * b.shape[2]
+    size = 3 * n
+    y = np.empty(size)
+    for d in range(3):
+        flat = b[d].reshape(n)
+        for i in range(n):
+            y[3 * i + d] = flat[i]
+    for i in range(size):
+        total = y[i]
+        for k in range(i):
+            total -= factor[i, k] * y[k]
+        y[i] = total / factor[i, i]
+    for i in range(size - 1, -1, -1):
+        total = y[i]
+        for k in range(i + 1, size):
+            total -= factor[k, i] * y[k]
+        y[i] = total / factor[i, i]
+    for d in range(3):
+        flat = x[d].reshape(n)
+        for i in range(n):
+            flat[i] = y[3 * i + d]
+
+
+@numba.njit(**JIT)
 def assemble_hierarchy(
         # inputs: the finest solved level's positions (x, rows, cols) and per-level data
         x_top, shapes, offsets, rest, stiffness, contraction, damping, beta, base_mass,
@@ -326,7 +408,9 @@ def assemble_hierarchy(
         # the spring blocks and the inverse diagonal blocks
         positions, mass, coef_uu, coef_iso, directions, block_inverse,
         # input on the finest level, output on the coarser ones: 1.0 at free points
-        free):
+        free,
+        # output: the coarsest grid's Cholesky factor, or a (0, 0) array (no direct solve)
+        factor):
     """
     Assemble ``A`` on every level, the coarser ones at the injected positions.
 
@@ -358,6 +442,8 @@ def assemble_hierarchy(
                        uu, iso, dirs)
         diagonal_inverse(mass[n0:n1].reshape(rows, cols), fr, uu, iso, dirs,
                          level_field(block_inverse, offsets, level, 6, rows, cols))
+        if level == 0 and factor.shape[0] > 0:
+            coarse_cholesky(mass[n0:n1].reshape(rows, cols), fr, uu, iso, dirs, factor)
 
 
 @numba.njit(**JIT)
@@ -373,7 +459,7 @@ def _level_apply(level, shapes, offsets, mass, free, coef_uu, coef_iso, directio
 @numba.njit(**JIT)
 def v_cycle(
         # inputs: the assembled hierarchy
-        shapes, offsets, mass, free, coef_uu, coef_iso, directions, block_inverse,
+        shapes, offsets, mass, free, coef_uu, coef_iso, directions, block_inverse, factor,
         # inputs: the right-hand side on the finest level and the cycle's settings
         b_top, sweeps, coarse_sweeps, omega,
         # work (flat, every level): corrections, right-hand sides, products
@@ -383,8 +469,9 @@ def v_cycle(
     """
     One V(sweeps, sweeps) cycle for ``A x = b`` from x = 0 (the preconditioner).
 
-    Down: smooth, restrict the residual; the coarsest level: ``coarse_sweeps`` sweeps; up:
-    add the prolonged correction, smooth.
+    Down: smooth, restrict the residual; the coarsest level: solved with its Cholesky
+    ``factor``, or ``coarse_sweeps`` sweeps without one; up: add the prolonged
+    correction, smooth.
     """
     top = shapes.shape[0] - 1
     for level in range(top, -1, -1):
@@ -395,6 +482,9 @@ def v_cycle(
         x = level_field(mg_x, offsets, level, 3, rows, cols)
         b = b_top if level == top else level_field(mg_b, offsets, level, 3, rows, cols)
         t = level_field(mg_t, offsets, level, 3, rows, cols)
+        if level == 0 and factor.shape[0] > 0:
+            coarse_solve(factor, b, x)
+            break
         count = coarse_sweeps if level == 0 else sweeps
         jacobi_update(inv, fr, b, t, omega, True, x)
         for _ in range(count - 1):
@@ -437,7 +527,7 @@ def _dot(a, b):
 @numba.njit(**JIT)
 def multigrid_cg(
         # inputs: the assembled hierarchy (see assemble_hierarchy)
-        shapes, offsets, mass, free, coef_uu, coef_iso, directions, block_inverse,
+        shapes, offsets, mass, free, coef_uu, coef_iso, directions, block_inverse, factor,
         # inputs: right-hand side on the finest level, stopping rule, V-cycle settings
         b, max_iter, rtol, sweeps, coarse_sweeps, omega,
         # work: the V-cycle's flat buffers, then finest-level vectors
@@ -461,8 +551,8 @@ def multigrid_cg(
     bnorm = math.sqrt(_dot(b, b))
     if bnorm == 0.0:
         return 0, 0.0
-    v_cycle(shapes, offsets, mass, free, coef_uu, coef_iso, directions, block_inverse, r,
-            sweeps, coarse_sweeps, omega, mg_x, mg_b, mg_t, z)
+    v_cycle(shapes, offsets, mass, free, coef_uu, coef_iso, directions, block_inverse,
+            factor, r, sweeps, coarse_sweeps, omega, mg_x, mg_b, mg_t, z)
     for i in range(n):
         pf[i] = zf[i]
     rz = _dot(r, z)
@@ -477,7 +567,7 @@ def multigrid_cg(
         if rel <= rtol or it == max_iter:
             return it, rel
         v_cycle(shapes, offsets, mass, free, coef_uu, coef_iso, directions, block_inverse,
-                r, sweeps, coarse_sweeps, omega, mg_x, mg_b, mg_t, z)
+                factor, r, sweeps, coarse_sweeps, omega, mg_x, mg_b, mg_t, z)
         rz_new = _dot(r, z)
         beta = rz_new / rz
         rz = rz_new

@@ -1,0 +1,271 @@
+"""
+The ``multigrid`` solver: BDF2 with Newton and multigrid-preconditioned CG.
+
+Its linear algebra against backward Euler's matrix, the V-cycle's worth as a
+preconditioner, BDF2's order, momentum, the static equilibrium against an independent
+energy minimum, material damping in closed form, determinism and refusal.
+"""
+
+from hcloth_ros.bench import equilibrium
+from hcloth_ros.bench.scenarios import build_model, prepare
+from hcloth_ros.core import Control, kernels, make_solver, State
+from hcloth_ros.core.kernels.multigrid import apply_level, level_directions, level_field
+from hcloth_ros.core.multigrid_solver import _Hierarchy
+import numpy as np
+import pytest
+
+H = 1.0 / 60.0
+
+
+def swung(n, levels, seconds, **options):
+    """Return ``(model, control, state)``: the benchmark swing after ``seconds``."""
+    model = build_model(n, levels)
+    state = State.at_rest(model)
+    control = prepare('swing', model, state).control
+    solver = make_solver('multigrid', model, **options)
+    for _ in range(int(round(seconds / H))):
+        assert solver.step(state, control, H).ok
+    return model, control, state
+
+
+def assembled(model, control, state, beta=H):
+    """Return the V-cycle hierarchy assembled at the finest level's state."""
+    top = model.level_count - 1
+    hier = _Hierarchy(model, top)
+    hier.set_holds(control.holds(top).kind)
+    kernels.assemble_hierarchy(state.q[top], hier.shapes, hier.offsets, hier.rest,
+                               hier.stiffness, hier.contraction, 0.0, beta, hier.base_mass,
+                               hier.air_drag, hier.positions, hier.mass, hier.coef_uu,
+                               hier.coef_iso, hier.directions, hier.block_inverse, hier.free,
+                               hier.factor)
+    return hier
+
+
+def top_apply(hier, p):
+    """Return ``A p`` on the hierarchy's finest grid."""
+    last = len(hier.shapes) - 1
+    rows, cols = hier.shapes[last]
+    n0 = hier.offsets[last]
+    out = np.zeros_like(p)
+    apply_level(hier.mass[n0:].reshape(rows, cols), hier.free[n0:].reshape(rows, cols),
+                level_field(hier.coef_uu, hier.offsets, last, 6, rows, cols),
+                level_field(hier.coef_iso, hier.offsets, last, 6, rows, cols),
+                level_directions(hier.directions, hier.offsets, last, rows, cols), p, out)
+    return out
+
+
+def test_stored_blocks_give_backward_eulers_matrix():
+    # The stored spring blocks must reproduce the matrix-free backward-Euler system of
+    # the reference solver, (M - h^2 J) p on free points, to rounding (1e-12 of |A p|),
+    # and be symmetric, as CG needs.
+    model, control, state = swung(17, 2, 0.3, accurate_level=None)
+    top = model.level_count - 1
+    lv = model.level(top)
+    hier = assembled(model, control, state)
+    free = (control.holds(top).kind == 0).astype(float)
+    rng = np.random.default_rng(3)
+    p, q = (rng.standard_normal((3, lv.rows, lv.cols)) * free for _ in range(2))
+    expected = np.zeros_like(p)
+    kernels.system_apply(state.q[top], lv.rest, lv.stiffness, lv.contraction, lv.mass, free,
+                         H, p, expected)
+    got = top_apply(hier, p)
+    assert np.max(np.abs(got - expected)) < 1e-12 * np.max(np.abs(expected))
+    assert abs(np.sum(q * got) - np.sum(p * top_apply(hier, q))) < 1e-12 * np.sum(
+        np.abs(q * got))
+
+
+def test_v_cycle_preconditioner_on_a_33_grid():
+    # The system the solver solves first at 1/60 s on the 33 x 33 swing after 0.5 s
+    # (stretched and compressed springs, two pins): backward Euler's Newton system at the
+    # first guess v + h g. Error in the energy norm |e|_A relative to the solution's,
+    # measured here with the default V(1,1) cycle: 0.007 after 16 iterations, where
+    # Jacobi-PCG is at 0.12. Asserted: below 0.05 after 16, at most a fifth of
+    # Jacobi-PCG's, and a residual that falls by 0.75 an iteration on average.
+    model, control, state = swung(33, 3, 0.5)
+    top = model.level_count - 1
+    lv = model.level(top)
+    kind = control.holds(top).kind
+    guess = np.ascontiguousarray(state.qd[top] + H * model.gravity[:, None, None])
+    x_guess, b = np.zeros_like(guess), np.zeros_like(guess)
+    kernels.newton_residual(state.q[top], state.qd[top], guess, state.q[top], kind, H,
+                            lv.mass, np.zeros_like(lv.mass), lv.rest, lv.stiffness,
+                            lv.contraction, 0.0, model.gravity, x_guess, b)
+    hier = assembled(model, control, State(state.q[:top] + [x_guess], state.qd))
+    work = [np.zeros_like(b) for _ in range(4)]
+
+    def pcg(iterations, rtol=1e-14):
+        x = np.zeros_like(b)
+        rel = kernels.multigrid_cg(
+            hier.shapes, hier.offsets, hier.mass, hier.free, hier.coef_uu, hier.coef_iso,
+            hier.directions, hier.block_inverse, hier.factor, b, iterations, rtol, 1, 4, 0.67,
+            *hier.mg, *work, x)[1]
+        return x, rel
+
+    exact, rel = pcg(500, 1e-13)
+    assert rel <= 1e-13
+
+    def energy_error(x):
+        e = x - exact
+        return np.sqrt(np.sum(e * top_apply(hier, e)) / np.sum(exact * top_apply(hier, exact)))
+
+    x16, rel16 = pcg(16)
+    assert rel16 ** (1.0 / 16) < 0.75, rel16
+    free = (kind == 0).astype(float)
+    diag, y16 = np.zeros_like(b), np.zeros_like(b)
+    kernels.system_diagonal(x_guess, lv.rest, lv.stiffness, lv.contraction, lv.mass, free,
+                            H, diag)
+    kernels.conjugate_gradient(x_guess, lv.rest, lv.stiffness, lv.contraction, lv.mass, free,
+                               H, b, y16, diag, 1e-14, 16, *work)
+    mg, jacobi = energy_error(x16), energy_error(y16)
+    print(f'|e|_A / |x|_A after 16 iterations: V(1,1)-PCG {mg:.3g}, Jacobi-PCG {jacobi:.3g}')
+    assert mg < 0.05 and mg < jacobi / 5, (mg, jacobi)
+
+
+def _swing_at(dt, integrator, seconds=0.25):
+    model = build_model(9, 2)
+    state = State.at_rest(model)
+    control = prepare('swing', model, state).control
+    solver = make_solver('multigrid', model, integrator=integrator, accurate_level=None,
+                         newton_iterations=10, cg_iterations=200, cg_rtol=1e-12)
+    for _ in range(int(round(seconds / dt))):
+        assert solver.step(state, control, dt).ok
+    return state.points(1)
+
+
+@pytest.mark.parametrize('integrator,order', [('bdf2', 2.0), ('backward_euler', 1.0)])
+def test_observed_order_when_the_step_halves(integrator, order):
+    # Solved to convergence, the distance between runs at dt and dt/2 shrinks by 2^order
+    # when dt halves. At 1/960 -> 1/3840 s on the 9 x 9 swing the ratios measured here
+    # give 1.94 (BDF2) and 0.95 (backward Euler); the remaining higher-order terms allow
+    # 0.3 either way.
+    runs = [_swing_at(1.0 / (960 * 2 ** i), integrator) for i in range(3)]
+    d1 = np.sqrt(np.mean(np.sum((runs[0] - runs[1]) ** 2, axis=1)))
+    d2 = np.sqrt(np.mean(np.sum((runs[1] - runs[2]) ** 2, axis=1)))
+    assert abs(np.log2(d1 / d2) - order) < 0.3, np.log2(d1 / d2)
+
+
+def test_released_mid_swing_the_centre_of_mass_falls_at_g():
+    # Springs act in equal and opposite pairs, so once the pins let go the centre of mass
+    # accelerates at exactly g; BDF2 integrates a constant acceleration exactly. The
+    # inexact linear solves leave a residual whose sum is a momentum error (0.15 % of g
+    # here) until the solver removes it, and eq. 7 on the finest level loses momentum
+    # until the solver restores it. Asserted on the finest level (the one published)
+    # and the solved one: vertical within 0.1 % of g, horizontal within 0.01 m/s^2, from
+    # the change of momentum over each step.
+    model, control, state = swung(33, 3, 0.5)
+    solver = make_solver('multigrid', model)
+    control.set_pins([])
+    levels = (solver.solved_level(), model.level_count - 1)
+    assert levels == (1, 2)
+
+    def momentum():
+        return [np.einsum('drc,rc->d', state.qd[k], model.level(k).mass) for k in levels]
+    history = [momentum()]
+    for _ in range(10):
+        assert solver.step(state, control, H).ok
+        history.append(momentum())
+    acceleration = np.diff(history, axis=0) / (H * model.total_mass)
+    assert np.all(np.abs(acceleration[..., 2] / model.gravity[2] - 1.0) < 1e-3), acceleration
+    assert np.all(np.abs(acceleration[..., :2]) < 0.01), acceleration
+
+
+@pytest.fixture(scope='module')
+def energy_minimum_33():
+    return equilibrium.reference(33)
+
+
+@pytest.mark.parametrize('levels,accurate_level', [(3, 1), (3, None)])
+def test_hung_cloth_rests_at_the_springs_equilibrium(energy_minimum_33, levels,
+                                                     accurate_level):
+    # The cloth hung from its top corners at its rest shape settles (air drag 1 N s/m^3)
+    # where its springs balance gravity: the drop below the pins matches the energy
+    # minimum of the same 33 x 33 mesh, found by L-BFGS in plain numpy, within 1 %
+    # (measured 0.03 %), with no strain limiting. The paper's method stretches it to
+    # 11 % instead. With accuracy up to 17 x 17 the finest level's inserted points settle
+    # by eq. 7 around the solved level's equilibrium.
+    points, drop = energy_minimum_33
+    model = equilibrium.hanging_model(33, levels, air_drag=1.0)
+    control, state = equilibrium.hang(model)
+    solver = make_solver('multigrid', model, accurate_level=accurate_level)
+    for _ in range(180):
+        assert solver.step(state, control, H).ok
+    assert np.max(np.abs(state.qd[-1])) < 1e-6      # at rest
+    got = equilibrium.drop(state.points(levels - 1))
+    assert abs(got / drop - 1.0) < 0.01, (got, drop)
+
+
+def test_air_drag_gives_the_terminal_velocity():
+    # A falling cloth under linear air drag c per unit area reaches v = m g / (c A):
+    # BDF2's steady state is exact (v+ = v^ makes the residual m g - c A v), approached
+    # geometrically by the inexact Newton steps (2e-6 left after 5 s, 50 time constants
+    # m / (c A), measured here): asserted to 1e-5.
+    drag = 2.0
+    model = equilibrium.hanging_model(17, 2, air_drag=drag)
+    state = State.at_rest(model)
+    solver = make_solver('multigrid', model)
+    for _ in range(300):
+        assert solver.step(state, Control(model), H).ok
+    terminal = model.total_mass * model.gravity[2] / (drag * model.width * model.height)
+    np.testing.assert_allclose(state.qd[-1][2], terminal, rtol=1e-5)
+
+
+def test_spring_damping_leaves_rigid_motion_alone():
+    # Spring damping resists the rate of change of each spring's length; a rigid motion
+    # (translation plus rotation) changes no length, so the residual with damping equals
+    # the one without (to rounding).
+    model = build_model(9, 1)
+    lv = model.level(0)
+    x = model.rest_positions(0)
+    omega, drift = np.array([0.3, -1.2, 0.7]), np.array([0.5, 0.0, -0.2])
+    v = np.ascontiguousarray(np.cross(omega, x.reshape(3, -1).T).T.reshape(x.shape)
+                             + drift[:, None, None])
+    kind = np.zeros((lv.rows, lv.cols), dtype=np.int8)
+    out = [np.zeros_like(x) for _ in range(4)]
+    x_hat = x - H * v       # so that the springs are evaluated at x^ + beta v = x
+    for damping, rhs in ((0.0, out[1]), (5.0, out[3])):
+        kernels.newton_residual(x_hat, v, v, x, kind, H, lv.mass, np.zeros_like(lv.mass),
+                                lv.rest, lv.stiffness, lv.contraction, damping,
+                                model.gravity, out[0], rhs)
+    assert np.max(np.abs(out[3] - out[1])) < 1e-12
+    # and it does act on a stretching motion: pulling one corner away
+    v2 = np.zeros_like(x)
+    v2[0, 0, 0] = -1.0
+    kernels.newton_residual(x, v2, v2, x, kind, H, lv.mass, np.zeros_like(lv.mass), lv.rest,
+                            lv.stiffness, lv.contraction, 5.0, model.gravity, out[0], out[1])
+    assert out[1][0, 0, 0] > 0.0        # damping pulls the corner back (+x)
+
+
+def test_two_runs_are_bit_identical_and_pins_exact():
+    runs = [swung(33, 3, 0.5)[2] for _ in range(2)]
+    for a, b in zip(runs[0].q + runs[0].qd, runs[1].q + runs[1].qd):
+        assert np.array_equal(a, b)
+    model = build_model(33, 3)
+    rest = State.at_rest(model)
+    top = model.level_count - 1
+    for g in (0, model.level(top).cols - 1):
+        assert np.array_equal(runs[0].q[top][:, 0, g], rest.q[top][:, 0, g])
+
+
+def test_refuses_a_non_finite_state_and_keeps_it():
+    model, control, state = swung(17, 2, 0.1)
+    state.qd[1][2, 5, 5] = np.nan
+    before = state.copy()
+    report = make_solver('multigrid', model).step(state, control, H)
+    assert not report.ok and 'non-finite' in report.reason
+    for a, b in zip(before.q + before.qd, state.q + state.qd):
+        assert np.array_equal(a, b, equal_nan=True)
+
+
+def test_swing_stays_under_10_percent_strain_without_strain_limiting():
+    # The solved level's springs hold the cloth on their own: over 2 s of the 17 x 17
+    # swing at 1/60 s (solved in full), no structural or shear spring exceeds 10 %.
+    model = build_model(17, 2)
+    state = State.at_rest(model)
+    control = prepare('swing', model, state).control
+    solver = make_solver('multigrid', model, accurate_level=None, strain_limit=None)
+    worst = 0.0
+    for _ in range(120):
+        report = solver.step(state, control, H)
+        assert report.ok
+        worst = max(worst, report.max_strain)
+    assert 0.01 < worst < 0.10, worst
