@@ -35,6 +35,7 @@ from geometry_msgs.msg import PoseStamped
 from hcloth_ros import lifetime, params
 from hcloth_ros.core import kernels_cached, warm_up
 from hcloth_ros.core.control import PINNED
+from hcloth_ros.core.solvers import HierarchicalSolver
 from hcloth_ros.governor import finest_to_simulate, Governor
 from hcloth_ros.grippers import GripperBank, points_within
 from hcloth_ros.node_params import (ALL_PARAMS, check_change, descriptor, NODE_PARAMS,
@@ -69,6 +70,8 @@ class ClothSimNode(Node):
         values = params.resolve({spec.name: self.get_parameter(spec.name).value
                                  for spec in params.PARAMS})
         self.model, self.solver, self.state, self.control = params.build_all(values)
+        # multi-level solvers simulate levels on demand and publish any level of detail
+        self._levelled = isinstance(self.solver, HierarchicalSolver)
         self.initial = self.state.copy()
         self.dt = float(values['solver.dt'])
         self.substeps = int(values['solver.substeps'])
@@ -178,7 +181,11 @@ class ClothSimNode(Node):
             elif p.name == 'solver.substeps':
                 self.substeps = int(p.value)
             elif p.name == 'solver.strain_limit':
-                self.solver.strain_limit = float(p.value) if p.value > 0 else None
+                limit = float(p.value) if p.value > 0 else None
+                if self.solver.name == 'multigrid':
+                    self.solver.refine_strain_limit = limit
+                else:
+                    self.solver.strain_limit = limit
 
     def _on_pose(self, name, msg):
         p, o = msg.pose.position, msg.pose.orientation
@@ -215,7 +222,7 @@ class ClothSimNode(Node):
     # --- the tick -----------------------------------------------------------------------
     def _set_levels(self):
         """Simulate only the levels someone consumes, within the governor's cap."""
-        if self.solver.name != 'hierarchical':
+        if not self._levelled:
             return
         consumed_all = self.recorder is not None or self.publisher.cloud_wanted()
         finest = finest_to_simulate(consumed_all, self.lod_level, self.governor.cap,
@@ -242,7 +249,7 @@ class ClothSimNode(Node):
                 break
         t1 = time.perf_counter()
         finest = self.solver.levels()[-1]
-        lod = min(self.lod_level, finest) if self.solver.name == 'hierarchical' else finest
+        lod = min(self.lod_level, finest) if self._levelled else finest
         cloud, marker = self.publisher.pack(self.state, finest, lod,
                                             self.get_clock().now().to_msg())
         t2 = time.perf_counter()

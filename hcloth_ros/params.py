@@ -40,6 +40,10 @@ PARAMS = [
           0.0, 1e6),
     Param('cloth.contraction', [0.0], 'per-level contraction resistance in [0, 1] '
           '([0.0] = all 1)', 0.0, 1.0),
+    Param('cloth.air_drag', 0.0, 'air drag per unit area: a point moving at v feels '
+          '-air_drag * area * v (N s/m^3; multigrid solver)', 0.0, 1e6),
+    Param('cloth.spring_damping', 0.0, 'damping of every spring along its length '
+          '(N s/m; multigrid solver)', 0.0, 1e6),
     Param('cloth.origin', [-0.5, 0.0, 1.5], 'world position of grid point (0, 0) at t = 0 (m)',
           -1e4, 1e4),
     Param('cloth.axis_u', [1.0, 0.0, 0.0], 'world direction of the cloth width', -1.0, 1.0),
@@ -52,11 +56,18 @@ PARAMS = [
           '[0.0] = none', -1e4, 1e4),
     Param('scene.friction', 0.5, 'Coulomb friction coefficient with obstacles', 0.0, 10.0),
     Param('scene.margin', 0.002, 'distance kept from obstacle surfaces (m)', 0.0, 0.1),
-    Param('solver.name', 'hierarchical', 'explicit, approx, hierarchical or implicit'),
+    Param('solver.name', 'multigrid', 'multigrid, hierarchical, explicit, approx or implicit'),
+    Param('solver.accurate_level', 1, 'multigrid: the finest level solved by BDF2 and '
+          'multigrid-CG; finer levels follow eq. 7 (clipped to the finest level)', 0, 9),
+    Param('solver.integrator', 'bdf2', 'multigrid: bdf2 or backward_euler'),
+    Param('solver.newton_iterations', 3, 'multigrid: Newton iterations per step', 1, 100),
+    Param('solver.cg_iterations', 2, 'multigrid: preconditioned CG iterations per Newton '
+          'iteration', 1, 1000),
     Param('solver.external', 'exact', 'gravity outside the filter (exact) or inside it '
           '(literal, the paper as written)'),
     Param('solver.strain_limit', 0.1, 'largest spring stretch kept by strain limiting '
-          '(0.1 = 10 %); 0 switches it off', 0.0, 10.0, False),
+          '(0.1 = 10 %; multigrid: on the eq. 7 levels only); 0 switches it off', 0.0, 10.0,
+          False),
     Param('solver.dt', 1 / 60, 'simulated seconds per step (s)', 1e-6, 0.1, False),
     Param('solver.substeps', 1, 'solver steps per timer tick', 1, 100, False),
     Param('pinned_points', [0, 8], 'finest-level point ids that hold still (see README '
@@ -147,13 +158,25 @@ def build_model(values):
         k_bend=float(values['cloth.k_bend']),
         stiffness_scale=_list_or_none(values['cloth.stiffness_scale']),
         contraction=_list_or_none(values['cloth.contraction']),
+        air_drag=float(values['cloth.air_drag']),
+        spring_damping=float(values['cloth.spring_damping']),
         placement=placement, scene=scene).finalize()
 
 
 def build_solver(model, values):
     limit = float(values['solver.strain_limit'])
-    return make_solver(values['solver.name'], model, external=values['solver.external'],
-                       strain_limit=limit if limit > 0 else None)
+    limit = limit if limit > 0 else None
+    name = values['solver.name']
+    if name == 'multigrid':
+        # the solved level's springs hold it: strain limiting is for the eq. 7 levels
+        return make_solver(name, model, external=values['solver.external'],
+                           refine_strain_limit=limit,
+                           accurate_level=min(int(values['solver.accurate_level']),
+                                              model.level_count - 1),
+                           integrator=values['solver.integrator'],
+                           newton_iterations=int(values['solver.newton_iterations']),
+                           cg_iterations=int(values['solver.cg_iterations']))
+    return make_solver(name, model, external=values['solver.external'], strain_limit=limit)
 
 
 def build_all(values):

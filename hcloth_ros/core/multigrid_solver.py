@@ -247,12 +247,13 @@ class MultigridSolver(HierarchicalSolver):
     def _refine(self, k, state, holds, h):
         """Table 1 on level k (constraint C, eq. 7), the displacement correction, then post."""
         self._eq7(k, state, holds, h)
-        # what the coarser level moved beyond h v+, prolonged onto the inserted points
+        # what the coarser level moved beyond h v+, prolonged onto the free inserted points
         drift, fine = self._scratch[k - 1], self._scratch[k]
         np.subtract(self._q[k - 1], state.q[k - 1], out=drift)
         drift -= h * self._qd[k - 1]
         self.kernels(k).prolong(drift, fine)
         fine[:, ::2, ::2] = 0.0
+        fine *= holds.kind == FREE       # held points are where their holds put them
         self._q[k] += fine
         self._post(k, state, holds, h, True)
         if not holds.kind.any():
