@@ -63,7 +63,7 @@ def _style(label):
     family = label.split()[0]
     colours = {'explicit': ['black'], 'approx': ['tab:blue'],
                'hierarchical': ['tab:orange', 'tab:red', 'tab:brown', 'tab:pink'],
-               'implicit': ['tab:green', 'olive', 'tab:cyan']}[family]
+               'implicit': ['tab:green', 'olive', 'tab:cyan'], 'multigrid': ['tab:purple']}[family]
     index = 0
     if family == 'hierarchical':
         index = int(label.split('L')[-1]) - 2

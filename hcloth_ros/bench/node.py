@@ -2,8 +2,10 @@
 Node benchmark: sim_node and a subscriber in separate processes, per-tick breakdown.
 
     python -m hcloth_ros.bench.node [--sizes 16k,65k] [--seconds 10] [--rate 60]
+                                    [-p solver.accurate_level:=3 ...]
 
-For each size the node runs the default hanging scene (level 0 9 x 9; 5 levels = 129 x 129
+For each size the node runs the default hanging scene (level 0 9 x 9; 4 levels = 65 x 65 =
+4,225 points, 5 levels = 129 x 129
 = 16,641 points, 6 levels = 257 x 257 = 66,049) at ``--rate`` Hz with the Fast DDS
 profile for large clouds in both processes, while a second process subscribes to
 ``cloth/points``. When the node stops it logs its tick statistics (p50/p99 of the solver
@@ -28,7 +30,7 @@ import subprocess
 import sys
 import time
 
-SIZES = {'16k': 5, '65k': 6}
+SIZES = {'4k': 4, '16k': 5, '65k': 6}
 
 # A subscriber to cloth/points in its own process: `rate SECONDS` counts the clouds for
 # that long and prints how many and how often; `first SECONDS` says 'ready', then prints
@@ -79,13 +81,15 @@ def first_start(cache, timeout=600.0):
     return first - start, log
 
 
-def run(levels, seconds, rate, record):
+def run(levels, seconds, rate, record, extra=()):
     from hcloth_ros.params import config_path
     profile = config_path('fastdds_large_clouds.xml')
     env = dict(os.environ, ROS_DOMAIN_ID=str(random.randint(100, 200)),
                FASTDDS_DEFAULT_PROFILES_FILE=profile, PYTHONUNBUFFERED='1')
     args = [sys.executable, '-m', 'hcloth_ros.node', '--ros-args', '-p',
             f'cloth.levels:={levels}', '-p', f'rate_hz:={float(rate)}']
+    for assignment in extra:
+        args += ['-p', assignment]
     if record:
         args += ['-p', f'rerun_path:=/tmp/hcloth_bench_{levels}.rrd', '-p',
                  'rerun_finest_every:=10']
@@ -136,6 +140,9 @@ def main(argv=None):
     parser.add_argument('--first-start', type=int, default=0, metavar='N',
                         help='also time N first starts on an empty numba cache')
     parser.add_argument('--json', metavar='PATH')
+    parser.add_argument('-p', '--param', action='append', default=[], metavar='NAME:=VALUE',
+                        help='a node parameter for every size (repeatable), e.g. '
+                             'solver.accurate_level:=3')
     args = parser.parse_args(argv)
     import numba
     print(f'node benchmark: {args.rate:g} Hz, {args.seconds:g} s a size, numba '
@@ -145,7 +152,7 @@ def main(argv=None):
     for size in filter(None, args.sizes.split(',')):
         levels = SIZES[size]
         print(f'{size}: running ...', flush=True)
-        s = results[size] = run(levels, args.seconds, args.rate, args.record)
+        s = results[size] = run(levels, args.seconds, args.rate, args.record, args.param)
         print(f'{size}: {s["ticks"]} ticks, levels {s["levels_min"]}..{s["levels_max"]}, '
               f'real-time factor {s["real_time_factor"]:.3f}, subscriber received '
               f'{s["received"]} at {s["receive_hz"]:.1f} Hz', flush=True)

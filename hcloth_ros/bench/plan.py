@@ -70,6 +70,10 @@ def accuracy_methods(plan, n):
         for ext in ('exact', 'literal'):
             methods.append(Method(f'hierarchical {ext} L{levels}', 'hierarchical',
                                   (('external', ext),), levels))
+    # the accurate solver on the levels that make level 0 9 x 9 (its default solves level 1)
+    levels = next((lv for lv in range(6, 0, -1) if fits(n, lv) and (n - 1) // 2 ** (lv - 1)
+                   >= 8), 1)
+    methods.append(Method(f'multigrid L{levels}', 'multigrid', (), levels))
     for tol in plan.implicit_tolerances:
         methods.append(Method(f'implicit tol {tol:g} m', 'implicit',
                               (('tolerance', tol), ('strain_limit', None)),
