@@ -31,8 +31,8 @@ import numpy as np
 
 DT = 1.0 / 60.0
 LEVELS = {17: 2, 33: 3, 65: 4}
-METHODS = (('multigrid', 'multigrid', {}), ('multigrid full', 'multigrid',
-                                             {'accurate_level': None}),
+METHODS = (('multigrid', 'multigrid', {}),
+           ('multigrid full', 'multigrid', {'accurate_level': None}),
            ('hierarchical', 'hierarchical', {}))
 
 
