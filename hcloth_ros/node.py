@@ -181,11 +181,7 @@ class ClothSimNode(Node):
             elif p.name == 'solver.substeps':
                 self.substeps = int(p.value)
             elif p.name == 'solver.strain_limit':
-                limit = float(p.value) if p.value > 0 else None
-                if self.solver.name == 'multigrid':
-                    self.solver.refine_strain_limit = limit
-                else:
-                    self.solver.strain_limit = limit
+                self.solver.strain_limit = float(p.value) if p.value > 0 else None
 
     def _on_pose(self, name, msg):
         p, o = msg.pose.position, msg.pose.orientation

@@ -167,16 +167,14 @@ def build_solver(model, values):
     limit = float(values['solver.strain_limit'])
     limit = limit if limit > 0 else None
     name = values['solver.name']
-    if name == 'multigrid':
-        # the solved level's springs hold it: strain limiting is for the eq. 7 levels
-        return make_solver(name, model, external=values['solver.external'],
-                           refine_strain_limit=limit,
-                           accurate_level=min(int(values['solver.accurate_level']),
-                                              model.level_count - 1),
-                           integrator=values['solver.integrator'],
-                           newton_iterations=int(values['solver.newton_iterations']),
-                           cg_iterations=int(values['solver.cg_iterations']))
-    return make_solver(name, model, external=values['solver.external'], strain_limit=limit)
+    options = {}
+    if name == 'multigrid':     # its own options (its strain limit is the eq. 7 levels')
+        options = {'accurate_level': int(values['solver.accurate_level']),
+                   'integrator': values['solver.integrator'],
+                   'newton_iterations': int(values['solver.newton_iterations']),
+                   'cg_iterations': int(values['solver.cg_iterations'])}
+    return make_solver(name, model, external=values['solver.external'], strain_limit=limit,
+                       **options)
 
 
 def build_all(values):

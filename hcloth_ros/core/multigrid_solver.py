@@ -50,6 +50,13 @@ def _grids_below(model, smallest=3):
         k_bend=lv0.stiffness[8], contraction=[lv0.contraction] * count).finalize().levels)
 
 
+def _inserted(level):
+    """1.0 at the points a level inserts, 0.0 at those it inherits (even row and column)."""
+    mask = np.ones((level.rows, level.cols))
+    mask[::2, ::2] = 0.0
+    return mask
+
+
 class _Hierarchy:
     """Flat buffers of the V-cycle's grids (below level 0, then levels ``0 .. top``)."""
 
@@ -73,17 +80,14 @@ class _Hierarchy:
         self.directions = np.zeros(18 * total)
         self.block_inverse = np.zeros(6 * total)
         self.mg = [np.zeros(3 * total) for _ in range(3)]
+        rows, cols = self.shapes[-1]
+        self.top_air_drag = self.air_drag[self.offsets[-2]:].reshape(rows, cols)
         coarsest = sizes[0] if sizes[0] <= DENSE_MAX_POINTS else 0
         self.factor = np.zeros((3 * coarsest, 3 * coarsest))
         shape = (3, levels[-1].rows, levels[-1].cols)
         # finest-level vectors: v+, held targets, -R, the correction, CG's r, z, p, Ap
         (self.v, self.target, self.rhs, self.correction, self.r, self.z, self.p,
          self.ap) = (np.zeros(shape) for _ in range(8))
-
-    def top_air_drag(self):
-        """Air drag per point of the top level (N s/m), ``(rows, cols)``."""
-        rows, cols = self.shapes[-1]
-        return self.air_drag[self.offsets[-2]:].reshape(rows, cols)
 
     def set_holds(self, kind):
         """Mark the top level's free points (the coarser grids follow by injection)."""
@@ -95,11 +99,12 @@ class MultigridSolver(HierarchicalSolver):
     BDF2 (or backward Euler) up to ``accurate_level``, Newton with multigrid-PCG.
 
     :param integrator: ``'bdf2'`` or ``'backward_euler'``.
-    :param accurate_level: the finest level solved by the integrator (None: the finest
-        level); finer ones are refined by eq. 7. The default, level 1 (17 x 17 on a 9 x 9
-        level 0), was the most accurate per second of the choices measured on the
-        benchmark's 33 x 33 and 65 x 65 swing: its few CG iterations converge further on a
-        small grid, and the motion it misses is the fine detail eq. 7 adds.
+    :param accurate_level: the finest level solved by the integrator, clipped to the
+        model's finest (None: the finest); finer ones are refined by eq. 7. The default,
+        level 1 (17 x 17 on a 9 x 9 level 0), was the most accurate per second of the
+        choices measured on the benchmark's 33 x 33 and 65 x 65 swing: its few CG
+        iterations converge further on a small grid, and the motion it misses is the fine
+        detail eq. 7 adds.
     :param newton_iterations: Newton iterations per step (fixed).
     :param cg_iterations: most PCG iterations per Newton iteration.
     :param cg_rtol: PCG stops earlier once the residual fell by this factor.
@@ -108,10 +113,10 @@ class MultigridSolver(HierarchicalSolver):
     :param omega: damping of the block-Jacobi sweeps.
     :param refresh_matrix: assemble the Newton matrix at every Newton iteration (True) or
         once per step at the first guess (False: cheaper, converges more slowly).
-    :param strain_limit: strain limiting on the solved level, off by default: its springs
-        hold the cloth on their own.
-    :param refine_strain_limit: strain limiting on the refinement levels (eq. 7 alone lets
-        their springs stretch: 30 % within half a second of the swing).
+    :param strain_limit: strain limiting on the refinement levels (eq. 7 alone lets their
+        springs stretch: 30 % within half a second of the swing).
+    :param solved_strain_limit: strain limiting on the solved level, off by default: its
+        springs hold the cloth on their own.
     :param options: those of :class:`~hcloth_ros.core.solvers.HierarchicalSolver`.
 
     Refinement levels run eq. 7 as :class:`HierarchicalSolver` does (backward-Euler form,
@@ -127,21 +132,18 @@ class MultigridSolver(HierarchicalSolver):
 
     def __init__(self, model, integrator='bdf2', accurate_level=1, newton_iterations=3,
                  cg_iterations=2, cg_rtol=1e-3, smoothing_sweeps=1, coarse_sweeps=4,
-                 omega=0.67, refresh_matrix=True, strain_limit=None, refine_strain_limit=0.1,
-                 **options):
-        super().__init__(model, strain_limit=strain_limit, **options)
-        if refine_strain_limit is not None and not 0.0 < refine_strain_limit < 10.0:
-            raise ValueError('refine_strain_limit must be in (0, 10) or None, '
-                             f'got {refine_strain_limit}')
-        self.refine_strain_limit = refine_strain_limit
+                 omega=0.67, refresh_matrix=True, solved_strain_limit=None, **options):
+        super().__init__(model, **options)
+        if solved_strain_limit is not None and not 0.0 < solved_strain_limit < 10.0:
+            raise ValueError('solved_strain_limit must be in (0, 10) or None, '
+                             f'got {solved_strain_limit}')
+        self.solved_strain_limit = solved_strain_limit
         if integrator not in INTEGRATORS:
             raise ValueError(f'integrator must be one of {INTEGRATORS}, got {integrator!r}')
         top = model.level_count - 1
-        self.accurate_level = top if accurate_level is None else int(accurate_level)
-        if not 0 <= self.accurate_level <= top:
-            if accurate_level != 1:     # the default fits any model
-                raise ValueError(f'accurate_level must be in 0..{top}, got {accurate_level}')
-            self.accurate_level = top
+        if accurate_level is not None and int(accurate_level) < 0:
+            raise ValueError(f'accurate_level must be >= 0 or None, got {accurate_level}')
+        self.accurate_level = top if accurate_level is None else min(int(accurate_level), top)
         for name, value, high in (('newton_iterations', newton_iterations, 100),
                                   ('cg_iterations', cg_iterations, 10000),
                                   ('smoothing_sweeps', smoothing_sweeps, 100),
@@ -168,10 +170,13 @@ class MultigridSolver(HierarchicalSolver):
         self._previous = [(np.zeros_like(q), np.zeros_like(q)) for q in self._q]
         self._current = [(np.zeros_like(q), np.zeros_like(q)) for q in self._q]
         self._history_key = None
+        self._history = False
         self._beta = None
+        # per refinement level: the masses of its inserted points (momentum matching)
+        self._inserted_mass = [None] + [lv.mass * _inserted(lv) for lv in model.levels[1:]]
 
     def _strain_limit(self, refinement):
-        return self.refine_strain_limit if refinement else self.strain_limit
+        return self.strain_limit if refinement else self.solved_strain_limit
 
     def solved_level(self):
         """Return the level the integrator solves: the accurate one, or the finest."""
@@ -182,67 +187,60 @@ class MultigridSolver(HierarchicalSolver):
             self._hierarchies[top] = _Hierarchy(self.model, top)
         return self._hierarchies[top]
 
-    def _has_history(self, state, key, levels):
+    def _has_history(self, state, key, top):
         """Whether the last accepted step of this solver led to ``state`` (BDF2 may go on)."""
-        return self._history_key == key and all(
-            np.array_equal(self._current[k][0], state.q[k])
-            and np.array_equal(self._current[k][1], state.qd[k]) for k in levels)
+        return (self._history_key == key and np.array_equal(self._current[top][0], state.q[top])
+                and np.array_equal(self._current[top][1], state.qd[top]))
 
     def step(self, state, control, dt):
         """Advance ``state`` by ``dt`` (see :meth:`Solver.step`); keeps BDF2's history."""
-        self._control = control
         h = float(dt)
         top = self.solved_level()
-        own = [top]     # the level with an anchor and a history
         key = (h, self.integrator, self.finest_level, state.time)
-        history = self.integrator == 'bdf2' and self._has_history(state, key, own)
-        if not history:
+        self._history = self.integrator == 'bdf2' and self._has_history(state, key, top)
+        if not self._history:
             # a start, a reset, another step size or an edited state: backward Euler
             self._history_key = None
-            for k in own:
-                np.copyto(self._current[k][0], state.q[k])
-                np.copyto(self._current[k][1], state.qd[k])
-        self._beta = 2.0 * h / 3.0 if history else h
-        for k in own:
-            self.kernels(k).anchor(state.q[k], state.qd[k], self._previous[k][0],
-                                   self._previous[k][1], history,
-                                   control.holds(k).kind, self._x_hat[k], self._v_hat[k])
+            np.copyto(self._current[top][0], state.q[top])
+            np.copyto(self._current[top][1], state.qd[top])
+        self._beta = 2.0 * h / 3.0 if self._history else h
         report = super().step(state, control, dt)
         if report.ok:
-            for k in own:
-                self._previous[k], self._current[k] = self._current[k], self._previous[k]
-                np.copyto(self._current[k][0], state.q[k])
-                np.copyto(self._current[k][1], state.qd[k])
+            self._previous[top], self._current[top] = self._current[top], self._previous[top]
+            np.copyto(self._current[top][0], state.q[top])
+            np.copyto(self._current[top][1], state.qd[top])
             self._history_key = (h, self.integrator, self.finest_level, state.time)
         report.newton_iterations = self.newton_iterations
         report.cg_iterations = report.extra.get('cg_iterations', 0)
         return report
 
     def _prescribe(self, k, state, holds, h):
-        """Held points' change: from the anchor over beta on the solved level."""
+        """
+        Held points' change; on the solved level from the step's anchor, over beta.
+
+        Levels below the solved one are not integrated (they are its points): nothing.
+        """
         top = self.solved_level()
         if k == top:
-            self.kernels(k).prescribe(self._x_hat[k], self._v_hat[k], holds.kind,
-                                      holds.drive_index, holds.drive_target, self._beta,
-                                      self._presc[k])
+            kit = self.kernels(k)
+            kit.anchor(state.q[k], state.qd[k], self._previous[k][0], self._previous[k][1],
+                       self._history, holds.kind, self._x_hat[k], self._v_hat[k])
+            kit.prescribe(self._x_hat[k], self._v_hat[k], holds.kind, holds.drive_index,
+                          holds.drive_target, self._beta, self._presc[k])
         elif k > top:
             super()._prescribe(k, state, holds, h)
 
     def _integrate(self, k, state, holds, h):
-        top, beta = self.solved_level(), self._beta
+        top = self.solved_level()
         if k > top:
             self._refine(k, state, holds, h)
-            return
-        if k > 0:
-            return      # written with level 0 below
-        holds_top = holds if top == 0 else self._control.holds(top)
-        self._prescribe(top, state, holds_top, h)
-        self._solve(top, holds_top, h, beta)
-        self._post(top, state, holds_top, beta, False)
-        kit = self.kernels(top)
-        for level in range(top - 1, -1, -1):
-            for arrays in (self._q, self._qd, self._dv):
-                kit.inject(arrays[level + 1], arrays[level])
+        elif k == top:
+            self._solve(top, holds, h, self._beta)
+            self._post(top, state, holds, self._beta, False)
+            kit = self.kernels(top)
+            for level in range(top - 1, -1, -1):    # the coarser levels are its points
+                for arrays in (self._q, self._qd, self._dv):
+                    kit.inject(arrays[level + 1], arrays[level])
 
     def _refine(self, k, state, holds, h):
         """Table 1 on level k (constraint C, eq. 7), the displacement correction, then post."""
@@ -252,7 +250,7 @@ class MultigridSolver(HierarchicalSolver):
         np.subtract(self._q[k - 1], state.q[k - 1], out=drift)
         drift -= h * self._qd[k - 1]
         self.kernels(k).prolong(drift, fine)
-        fine[:, ::2, ::2] = 0.0
+        fine *= self._inserted_mass[k] > 0
         fine *= holds.kind == FREE       # held points are where their holds put them
         self._q[k] += fine
         self._post(k, state, holds, h, True)
@@ -271,15 +269,14 @@ class MultigridSolver(HierarchicalSolver):
         target = (np.einsum('drc,rc->d', self._qd[k - 1], coarse_mass)
                   - np.einsum('drc,rc->d', state.qd[k - 1], coarse_mass)
                   + np.einsum('drc,rc->d', state.qd[k], fine_mass))
-        inserted = fine_mass.copy()
-        inserted[::2, ::2] = 0.0
+        inserted = self._inserted_mass[k]
         shift = (target - np.einsum('drc,rc->d', self._qd[k], fine_mass)) / inserted.sum()
         change = shift[:, None, None] * (inserted > 0)
         self._qd[k] += change
         self._dv[k] += change
         self._q[k] += h * change
 
-    def _conserve_momentum(self, hier, top, beta):
+    def _conserve_momentum(self, hier, top, kind, beta):
         """
         Zero the Newton residual's sum by a uniform velocity change (nothing held).
 
@@ -289,10 +286,10 @@ class MultigridSolver(HierarchicalSolver):
         """
         lv, g = self.model.level(top), self.model.gravity
         x_hat, v_hat = self._x_hat[top], self._v_hat[top]
-        drag = hier.top_air_drag()
+        drag = hier.top_air_drag
         self.kernels(top).newton_residual(
-            x_hat, v_hat, hier.v, hier.target, self._control.holds(top).kind, beta, lv.mass,
-            drag, lv.rest, lv.stiffness, lv.contraction, self.model.spring_damping, g,
+            x_hat, v_hat, hier.v, hier.target, kind, beta, lv.mass, drag, lv.rest,
+            lv.stiffness, lv.contraction, self.model.spring_damping, g,
             self._q[top], hier.rhs)
         shift = hier.rhs.sum(axis=(1, 2)) / (lv.mass.sum() + beta * drag.sum())
         hier.v += shift[:, None, None]
@@ -315,7 +312,7 @@ class MultigridSolver(HierarchicalSolver):
         cg_total = 0
         for newton in range(self.newton_iterations):
             kit.newton_residual(x_hat, v_hat, v, hier.target, holds.kind, beta, lv.mass,
-                                hier.top_air_drag(), lv.rest, lv.stiffness, lv.contraction,
+                                hier.top_air_drag, lv.rest, lv.stiffness, lv.contraction,
                                 self.model.spring_damping, g, x_new, hier.rhs)
             if newton == 0 or self.refresh_matrix:
                 kit.assemble_hierarchy(x_new, hier.shapes, hier.offsets, hier.rest,
@@ -333,7 +330,7 @@ class MultigridSolver(HierarchicalSolver):
             cg_total += iterations
             v += hier.correction
         if not holds.kind.any():
-            self._conserve_momentum(hier, top, beta)
+            self._conserve_momentum(hier, top, holds.kind, beta)
         kit.new_positions(x_hat, v, hier.target, holds.kind, beta, x_new)
         np.copyto(self._qd[top], v)
         np.subtract(v, self._current[top][1], out=self._dv[top])     # v+ - v_n

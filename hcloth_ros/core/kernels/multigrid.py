@@ -57,8 +57,6 @@ from hcloth_ros.core.kernels.springs import spring_vector
 import numba
 import numpy as np
 
-# Per-point entries of the symmetric inverse diagonal block: xx, yy, zz, xy, xz, yz.
-BLOCK = 6
 # Largest coarsest grid solved by dense Cholesky (75 unknowns: about 0.1 M operations).
 DENSE_MAX_POINTS = 25
 
@@ -457,6 +455,30 @@ def _level_apply(level, shapes, offsets, mass, free, coef_uu, coef_iso, directio
 
 
 @numba.njit(**JIT)
+def _cycle_views(level, shapes, offsets, free, block_inverse, b_top, mg_x, mg_b, mg_t):
+    """Return a level's free mask, inverse blocks, correction, right-hand side, work vector."""
+    rows, cols = shapes[level, 0], shapes[level, 1]
+    n0, n1 = offsets[level], offsets[level + 1]
+    top = shapes.shape[0] - 1
+    b = b_top if level == top else level_field(mg_b, offsets, level, 3, rows, cols)
+    return (free[n0:n1].reshape(rows, cols),
+            level_field(block_inverse, offsets, level, 6, rows, cols),
+            level_field(mg_x, offsets, level, 3, rows, cols), b,
+            level_field(mg_t, offsets, level, 3, rows, cols))
+
+
+@numba.njit(**JIT)
+def _smooth(level, shapes, offsets, mass, free, coef_uu, coef_iso, directions, block_inverse,
+            level_free, b, t, omega, count, zero_start, x):
+    """``count`` block-Jacobi sweeps on a level (the first from x = 0 if ``zero_start``)."""
+    if zero_start:
+        jacobi_update(block_inverse, level_free, b, t, omega, True, x)
+    for _ in range(count - 1 if zero_start else count):
+        _level_apply(level, shapes, offsets, mass, free, coef_uu, coef_iso, directions, x, t)
+        jacobi_update(block_inverse, level_free, b, t, omega, False, x)
+
+
+@numba.njit(**JIT)
 def v_cycle(
         # inputs: the assembled hierarchy
         shapes, offsets, mass, free, coef_uu, coef_iso, directions, block_inverse, factor,
@@ -475,22 +497,13 @@ def v_cycle(
     """
     top = shapes.shape[0] - 1
     for level in range(top, -1, -1):
-        rows, cols = shapes[level, 0], shapes[level, 1]
-        n0, n1 = offsets[level], offsets[level + 1]
-        fr = free[n0:n1].reshape(rows, cols)
-        inv = level_field(block_inverse, offsets, level, 6, rows, cols)
-        x = level_field(mg_x, offsets, level, 3, rows, cols)
-        b = b_top if level == top else level_field(mg_b, offsets, level, 3, rows, cols)
-        t = level_field(mg_t, offsets, level, 3, rows, cols)
+        fr, inv, x, b, t = _cycle_views(level, shapes, offsets, free, block_inverse, b_top,
+                                        mg_x, mg_b, mg_t)
         if level == 0 and factor.shape[0] > 0:
             coarse_solve(factor, b, x)
             break
-        count = coarse_sweeps if level == 0 else sweeps
-        jacobi_update(inv, fr, b, t, omega, True, x)
-        for _ in range(count - 1):
-            _level_apply(level, shapes, offsets, mass, free, coef_uu, coef_iso, directions,
-                         x, t)
-            jacobi_update(inv, fr, b, t, omega, False, x)
+        _smooth(level, shapes, offsets, mass, free, coef_uu, coef_iso, directions, inv, fr,
+                b, t, omega, coarse_sweeps if level == 0 else sweeps, True, x)
         if level == 0:
             break
         # the residual, restricted
@@ -503,19 +516,12 @@ def v_cycle(
         restrict(t, free[c0:c1].reshape(crows, ccols),
                  level_field(mg_b, offsets, level - 1, 3, crows, ccols))
     for level in range(1, top + 1):
-        rows, cols = shapes[level, 0], shapes[level, 1]
-        n0, n1 = offsets[level], offsets[level + 1]
-        fr = free[n0:n1].reshape(rows, cols)
-        inv = level_field(block_inverse, offsets, level, 6, rows, cols)
-        x = level_field(mg_x, offsets, level, 3, rows, cols)
-        b = b_top if level == top else level_field(mg_b, offsets, level, 3, rows, cols)
-        t = level_field(mg_t, offsets, level, 3, rows, cols)
+        fr, inv, x, b, t = _cycle_views(level, shapes, offsets, free, block_inverse, b_top,
+                                        mg_x, mg_b, mg_t)
         prolong_add(level_field(mg_x, offsets, level - 1, 3, shapes[level - 1, 0],
                                 shapes[level - 1, 1]), fr, x)
-        for _ in range(sweeps):
-            _level_apply(level, shapes, offsets, mass, free, coef_uu, coef_iso, directions,
-                         x, t)
-            jacobi_update(inv, fr, b, t, omega, False, x)
+        _smooth(level, shapes, offsets, mass, free, coef_uu, coef_iso, directions, inv, fr,
+                b, t, omega, sweeps, False, x)
     _copy(level_field(mg_x, offsets, top, 3, shapes[top, 0], shapes[top, 1]), x_top)
 
 
