@@ -7,7 +7,8 @@
 
 Writes into ``--out``: ``results.json`` (every number, with the plan and the machine),
 ``summary.md`` (the README's tables), ``accuracy.csv``, ``stability.csv``, ``violent.csv``,
-``peers.csv``, ``fig4.csv`` and the charts ``accuracy.png``, ``stability.png``,
+``peers.csv``, ``equilibrium.csv``,
+``fig4.csv`` and the charts ``accuracy.png``, ``stability.png``,
 ``fig3_5.png``, ``fig6.png``. Every run uses one numba thread, as the peers do, so costs
 compare like with like.
 """
@@ -19,13 +20,13 @@ import os
 import platform
 import time
 
-from hcloth_ros.bench import accuracy, paper, report, stability, versus
+from hcloth_ros.bench import accuracy, equilibrium, paper, report, stability, versus
 from hcloth_ros.bench.plan import FULL, Plan, PLANS, QUICK, TINY
 from hcloth_ros.core import warm_up
 import numba
 import numpy as np
 
-SECTIONS = ('accuracy', 'stability', 'paper', 'peers')
+SECTIONS = ('accuracy', 'equilibrium', 'stability', 'paper', 'peers')
 
 
 class Progress:
@@ -94,6 +95,8 @@ def _estimate(plan, sections):
     total = 0
     if 'accuracy' in sections:
         total += len(accuracy.jobs(plan)) + len(plan.scenarios) * len(plan.sizes)
+    if 'equilibrium' in sections:
+        total += sum(1 + len(equilibrium.methods(n)) for n in plan.equilibrium_sizes)
     if 'stability' in sections:
         total += len(stability.map_jobs(plan)) + 3 * len(stability.violent_methods(9))
     if 'paper' in sections:
@@ -125,6 +128,10 @@ def run(plan, out, sections=SECTIONS, show_progress=True):
             results['reference_self_check'] = checks
             _write_csv(os.path.join(out, 'accuracy.csv'), rows)
             accuracy.chart(rows, checks, plan, os.path.join(out, 'accuracy.png'))
+        if 'equilibrium' in sections:
+            rows = equilibrium.rest_shapes(plan.equilibrium_sizes, progress)
+            results['equilibrium'] = rows
+            _write_csv(os.path.join(out, 'equilibrium.csv'), rows)
         if 'stability' in sections:
             rows, limits = stability.stability_map(plan, progress)
             results['stability'] = rows
@@ -212,6 +219,10 @@ def summary(results):
                      f'{row["smallest_blown_up"]:.2e} s: '
                      + {True: 'consistent', False: 'INCONSISTENT', None: 'not bracketed'}[
                          row['consistent']])
+    for row in results.get('equilibrium', []):
+        lines.append(f'rest shape n={row["n"]:3d} {row["method"]:42s} drop {row["drop"]:.4f} m '
+                     f'({100 * row["drop_error"]:+.2f} % from the energy minimum), RMS '
+                     f'{row["position_rms"]:.4f} m {row["failed"]}')
     for row in results.get('peers', []):
         lines.append(f'{row["simulator"]:40s} n={row["n"]:3d} dt=1/{1 / row["dt"]:.0f} '
                      f'{row["wall_per_sim_second"]:.3f} s/s (x{row["cost_vs_hcloth_default"]:.2f})'

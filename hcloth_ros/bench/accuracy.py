@@ -50,7 +50,8 @@ def sweep(plan, progress):
                'status': errors.classify(run), 'failed': run.failed,
                'reference_self_check': check, 'reference_dt': ref.dt}
         if run.failed:
-            row.update(position_rms=np.nan, com_rms=np.nan, energy_loss_rate=np.nan,
+            row.update(position_rms=np.nan, position_rms_first_second=np.nan,
+                       com_rms=np.nan, energy_loss_rate=np.nan,
                        max_strain=run.max_strain)
         else:
             row.update(errors.compare(run, ref))
@@ -63,12 +64,15 @@ def _style(label):
     family = label.split()[0]
     colours = {'explicit': ['black'], 'approx': ['tab:blue'],
                'hierarchical': ['tab:orange', 'tab:red', 'tab:brown', 'tab:pink'],
-               'implicit': ['tab:green', 'olive', 'tab:cyan'], 'multigrid': ['tab:purple']}[family]
+               'implicit': ['tab:green', 'olive', 'tab:cyan'],
+               'multigrid': ['tab:purple', 'indigo', 'orchid']}[family]
     index = 0
     if family == 'hierarchical':
         index = int(label.split('L')[-1]) - 2
     elif family == 'implicit':
         index = {'0.01': 0, '0.0001': 1}.get(label.split()[2], 2)
+    elif family == 'multigrid':
+        index = 1 if 'solved finest' in label else 2 if 'backward Euler' in label else 0
     return {'color': colours[min(index, len(colours) - 1)],
             'ls': '--' if 'literal' in label else '-', 'marker': 'o', 'ms': 4}
 

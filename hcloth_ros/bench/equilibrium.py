@@ -131,3 +131,68 @@ def reference(n, k=1000.0):
     held = control.holds(0).kind.ravel() != 0
     x, _, _ = minimise(model.level(0), model.gravity, state.points(0), held)
     return x, drop(x)
+
+
+# --- the benchmark section: every solver's rest shape against the energy minimum -------
+
+SETTLE_SECONDS = 4.0
+SETTLE_DT = 1.0 / 60.0
+SETTLE_AIR_DRAG = 1.0   # N s/m^3; read by the multigrid solver only (the others damp anyway)
+
+
+def methods(n):
+    """List the methods whose rest shape is checked on an ``n x n`` cloth (plan.Method)."""
+    from hcloth_ros.bench.plan import Method, multigrid_levels, multigrid_methods
+    levels = multigrid_levels(n)
+    return [*multigrid_methods(n),
+            Method(f'hierarchical exact L{levels}, 10 % strain limit', 'hierarchical', (),
+                   levels),
+            Method(f'hierarchical exact L{levels}, no strain limit', 'hierarchical',
+                   (('strain_limit', None),), levels),
+            Method('implicit tol 1e-3 m', 'implicit',
+                   (('tolerance', 1e-3), ('strain_limit', None)), max_n=33)]
+
+
+def settle(method, n, seconds=SETTLE_SECONDS, dt=SETTLE_DT):
+    """
+    Hang the cloth at its rest shape and step it ``seconds``.
+
+    Returns the finest points ``(n*n, 3)``, the largest speed at the end (m/s) and why the
+    run stopped early ('' if it did not).
+    """
+    from hcloth_ros.core import make_solver
+    model = hanging_model(n, method.levels, air_drag=SETTLE_AIR_DRAG)
+    control, state = hang(model)
+    solver = make_solver(method.solver, model, **method.kwargs)
+    top = model.level_count - 1
+    for _ in range(int(round(seconds / dt))):
+        report = solver.step(state, control, dt)
+        if not report.ok:
+            return state.points(top), np.inf, report.reason
+    speed = float(np.max(np.linalg.norm(state.qd[top].reshape(3, -1), axis=0)))
+    return state.points(top), speed, ''
+
+
+def rest_shapes(sizes, progress):
+    """
+    One row per size and method: its rest shape against the energy minimum.
+
+    ``drop`` (m, top to lowest point), ``drop_error`` (relative to the minimum's),
+    ``position_rms`` (m, every point against the minimum's) and ``end_speed`` (m/s, the
+    largest at the end: near 0 when the cloth has settled).
+    """
+    rows = []
+    for n in sizes:
+        progress(f'equilibrium n={n}: energy minimum')
+        x_min, drop_min = reference(n)
+        for m in methods(n):
+            if n > m.max_n:
+                continue
+            progress(f'equilibrium n={n}: {m.label}')
+            x, speed, failed = settle(m, n)
+            rows.append({'n': n, 'method': m.label, 'drop': drop(x), 'minimum_drop': drop_min,
+                         'drop_error': drop(x) / drop_min - 1.0,
+                         'position_rms': float(np.sqrt(np.mean(np.sum((x - x_min) ** 2,
+                                                                      axis=1)))),
+                         'end_speed': speed, 'failed': failed})
+    return rows

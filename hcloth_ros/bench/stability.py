@@ -6,7 +6,7 @@ that moves fast).
 """
 
 from hcloth_ros.bench import errors
-from hcloth_ros.bench.plan import Method, stability_methods
+from hcloth_ros.bench.plan import Method, multigrid_methods, stability_methods
 from hcloth_ros.bench.scenarios import build_model, simulate, VIOLENT, VIOLENT_TEXT
 from hcloth_ros.core.metrics import explicit_step_limit
 import numpy as np
@@ -115,10 +115,12 @@ def violent_methods(n):
     return [Method('explicit', 'explicit', (('strain_limit', None),), dts=(1 / 1920,)),
             Method('approx exact', 'approx', dts=(1 / 60,)),
             Method('approx literal', 'approx', (('external', 'literal'),), dts=(1 / 60,)),
-            Method(f'hierarchical exact L{levels} (default)', 'hierarchical', (), levels,
+            Method(f'hierarchical exact L{levels}', 'hierarchical', (), levels,
                    dts=(1 / 60,)),
             Method(f'hierarchical literal L{levels}', 'hierarchical', (('external', 'literal'),),
                    levels, dts=(1 / 60,)),
+            *(Method(m.label, m.solver, m.options, m.levels, dts=(1 / 60,))
+              for m in multigrid_methods(n, backward_euler=False, levels=levels)),
             Method('implicit tol 1e-3 m', 'implicit',
                    (('tolerance', 1e-3), ('strain_limit', None)), dts=(1 / 60,))]
 

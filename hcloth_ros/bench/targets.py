@@ -27,20 +27,12 @@ from hcloth_ros.bench import equilibrium, errors
 from hcloth_ros.bench.reference import reference
 from hcloth_ros.bench.scenarios import simulate
 from hcloth_ros.core import make_solver
-import numpy as np
 
 DT = 1.0 / 60.0
 LEVELS = {17: 2, 33: 3, 65: 4}
 METHODS = (('multigrid', 'multigrid', {}),
            ('multigrid full', 'multigrid', {'accurate_level': None}),
            ('hierarchical', 'hierarchical', {}))
-
-
-def first_second_rms(run, ref):
-    """RMS vertex distance over the samples of the first second (m)."""
-    n = min(len(run.times), len(ref.times), int(np.sum(ref.times <= 1.0 + 1e-9)))
-    d = np.linalg.norm(run.points[:n].astype(float) - ref.points[:n], axis=2)
-    return float(np.sqrt(np.mean(d ** 2)))
 
 
 def accuracy(sizes, repeats, progress=print):
@@ -56,7 +48,7 @@ def accuracy(sizes, repeats, progress=print):
                 run = runs[0]
                 row = {'n': n, 'scenario': scenario, 'method': label,
                        'rms': errors.position_rms(run, ref),
-                       'rms_first_second': first_second_rms(run, ref),
+                       'rms_first_second': errors.first_second_rms(run, ref),
                        'max_strain': run.max_strain, 'failed': run.failed,
                        'wall_per_sim_second': min(r.wall_per_sim_second for r in runs),
                        'reference_self_check': check}
