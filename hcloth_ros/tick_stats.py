@@ -33,13 +33,28 @@ class TickStats:
         self.count += 1
 
     def summary(self):
-        """Return p50/p99 in ms of each phase, ticks, real-time factor, levels simulated."""
+        """
+        Return p50/p99 in ms of each phase, ticks, real-time factor, levels simulated.
+
+        ``top_levels`` holds the same percentiles over the ticks that simulated the most
+        levels of the window only, and their count: the node's cost at its full
+        resolution, without the ticks before a subscriber wanted the finest level or
+        after the governor shed levels.
+        """
         out = {'ticks': self.count}
+        levels = np.asarray(self.samples['levels'])
+        top = levels == levels.max()
+        out['top_levels'] = {'ticks': int(top.sum())}
         for name in PHASES:
             ms = np.asarray(self.samples[name]) * 1e3
-            out[name] = {'p50': float(np.percentile(ms, 50)), 'p99': float(np.percentile(ms, 99))}
+            out[name] = _percentiles(ms)
+            out['top_levels'][name] = _percentiles(ms[top])
         wall = time.monotonic() - self.wall_start
         out['real_time_factor'] = self.samples['sim_time'][-1] / wall if wall > 0 else 0.0
-        out['levels_min'] = int(min(self.samples['levels']))
-        out['levels_max'] = int(max(self.samples['levels']))
+        out['levels_min'] = int(levels.min())
+        out['levels_max'] = int(levels.max())
         return out
+
+
+def _percentiles(ms):
+    return {'p50': float(np.percentile(ms, 50)), 'p99': float(np.percentile(ms, 99))}

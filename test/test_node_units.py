@@ -210,3 +210,6 @@ def test_tick_stats_summary_from_made_up_ticks():
     assert out['ticks'] == 200 and (out['levels_min'], out['levels_max']) == (3, 4)
     assert out['tick']['p50'] == pytest.approx(5.05, abs=0.01)    # ms, last 100 ticks
     assert out['tick']['p99'] == pytest.approx(9.9, abs=0.02)
+    # the ticks at 4 levels are the odd ones: 0.2, 0.4 .. 10 ms
+    top = out['top_levels']
+    assert top['ticks'] == 50 and top['tick']['p50'] == pytest.approx(5.1, abs=0.01)

@@ -23,15 +23,18 @@ from hcloth_ros.core.state import State
 import numba
 
 
-# Seconds a kernel took to compile from an empty cache here (2 cores, numba 0.68): only
-# to balance the shares of the processes; unknown kernels count 1.
+# Seconds a kernel took to compile from an empty cache here (2 cores, numba 0.68; the
+# multigrid ones with the other core busy): only to balance the shares of the processes;
+# unknown kernels count 1.
 COMPILE_SECONDS = {'strain_limit': 7.3, 'strain_limit_parallel': 6.0, 'eq7_level': 2.2,
                    'eq7_level_parallel': 3.0, 'strain_stats': 1.9,
                    'strain_stats_parallel': 2.5, 'eq6_first_sweep': 2.1,
                    'eq6_second_sweep': 1.2, 'contact': 1.6, 'conjugate_gradient': 4.0,
                    'conjugate_gradient_parallel': 3.0, 'system_apply': 1.8,
                    'system_apply_parallel': 2.5, 'system_diagonal': 1.5, 'explicit_step': 1.5,
-                   'energy': 1.0}
+                   'energy': 1.0, 'multigrid_cg': 13.3, 'assemble_hierarchy': 8.1,
+                   'newton_residual': 1.8, 'anchor': 1.8, 'new_positions': 0.4,
+                   'start_velocity': 0.3, 'prescribe': 0.3, 'prolong': 0.5, 'inject': 0.1}
 
 
 # Options a solver runs with to reach all its kernels: the multigrid solver refines by
