@@ -22,7 +22,7 @@ setup(
     extras_require={
         'test': ['pytest'],
         # other simulators the benchmark compares against (hcloth_bench, section peers)
-        'peers': ['mujoco==3.14.0', 'pybullet==3.2.7'],
+        'peers': ['mujoco==3.14.0', 'pybullet==3.2.7', 'newton==1.8.0', 'warp-lang==1.19.0'],
     },
     entry_points={
         'console_scripts': [

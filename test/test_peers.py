@@ -1,8 +1,9 @@
 """
 The peer simulators on our scene (hcloth_ros.bench.peers).
 
-The peers are optional extras (``pip install mujoco==3.14.0 pybullet==3.2.7``): every test
-of a peer starts with ``pytest.importorskip`` so the suite passes without them.
+The peers are optional extras
+(``pip install mujoco==3.14.0 pybullet==3.2.7 newton==1.8.0 warp-lang==1.19.0``): every
+test of a peer starts with ``pytest.importorskip`` so the suite passes without them.
 """
 
 import sys
@@ -16,12 +17,17 @@ LADDER = (1 / 30, 1 / 60, 1 / 120, 1 / 240, 1 / 480, 1 / 960, 1 / 1920)
 
 # A modest time step each peer is stable at for n = 9. MuJoCo's discrete integrator is
 # implicit and stays plausible even at 1/30; PyBullet integrates the springs explicitly
-# and blows up at 1/480 (strain ~1e4), so 1/960.
-STABLE_DT = {'mujoco': 1 / 240, 'pybullet': 1 / 960}
+# and blows up at 1/480 (strain ~1e4), so 1/960. Newton's VBD is implicit but its 10
+# iterations leave 50 % strain at 1/30 and 15 % at 1/60, 2.4 % at 1/240; its semi-implicit
+# solver is explicit and blows up at 1/480 (strain ~3e3), so 1/960.
+STABLE_DT = {'mujoco': 1 / 240, 'pybullet': 1 / 960, 'newton_vbd': 1 / 240,
+             'newton_semi_implicit': 1 / 960}
 
 # Largest structural strain over the 2 s at those steps, measured (MuJoCo 3.14.0,
-# PyBullet 3.2.7): 0.012 and 0.025. The bounds leave a factor of about two.
-STRAIN_BOUND = {'mujoco': 0.03, 'pybullet': 0.05}
+# PyBullet 3.2.7): 0.012 and 0.025; Newton 1.8.0 (Warp 1.19.0, CPU): VBD 0.0241,
+# semi-implicit 0.0177. The bounds leave a factor of about two.
+STRAIN_BOUND = {'mujoco': 0.03, 'pybullet': 0.05, 'newton_vbd': 0.05,
+                'newton_semi_implicit': 0.04}
 
 PIN_TOLERANCE = 1e-3      # m
 START = peers.HEIGHT      # m, the cloth's initial height
@@ -97,6 +103,24 @@ def test_pybullet_hangs_plausibly():
     _assert_hangs_plausibly('pybullet')
 
 
+def _assert_one_thread(name):
+    """Check that the stepping loop took about as much CPU time as wall time: one thread."""
+    r = _run(name)
+    assert r['cpu_seconds'] < 1.2 * r['wall_seconds'] + 0.01
+
+
+def test_newton_vbd_hangs_plausibly():
+    pytest.importorskip('newton')
+    _assert_hangs_plausibly('newton_vbd')
+    _assert_one_thread('newton_vbd')
+
+
+def test_newton_semi_implicit_hangs_plausibly():
+    pytest.importorskip('newton')
+    _assert_hangs_plausibly('newton_semi_implicit')
+    _assert_one_thread('newton_semi_implicit')
+
+
 def test_mujoco_largest_plausible_step():
     pytest.importorskip('mujoco')
     r = _assert_ladder('mujoco')
@@ -107,6 +131,51 @@ def test_pybullet_largest_plausible_step():
     pytest.importorskip('pybullet')
     r = _assert_ladder('pybullet')
     assert r['dt'] <= 1 / 480                     # explicit springs: a small rung
+
+
+def test_newton_vbd_largest_plausible_step():
+    pytest.importorskip('newton')
+    r = _assert_ladder('newton_vbd')
+    # implicit, but 10 iterations leave 1/30 at 50 % strain (measured 0.50): the second rung
+    assert r['dt'] == pytest.approx(1 / 60)
+    assert r['tried'][0]['finite'] and r['tried'][0]['max_strain'] > 0.4
+
+
+def test_newton_semi_implicit_largest_plausible_step():
+    pytest.importorskip('newton')
+    r = _assert_ladder('newton_semi_implicit')
+    # explicit springs: 1/480 blows up (strain ~3e3), 1/960 holds
+    assert r['dt'] == pytest.approx(1 / 960)
+
+
+def test_newton_graph_replay_is_the_solvers_step():
+    """
+    The recorded CPU graphs step exactly as the solver's own launches.
+
+    Ten steps of each solver, replayed from the graphs, against ten plain steps of an
+    identically built scene.
+    """
+    newton = pytest.importorskip('newton')
+    wp = pytest.importorskip('warp')
+    dt = 1 / 960
+    for solver in ('vbd', 'semi_implicit'):
+        with wp.ScopedDevice('cpu'), peers._silenced_output():
+            model, engine, _ = peers._newton_scene(newton, N, solver)
+            step, positions = peers._newton_stepper(wp, model, engine, dt)
+            start = positions().copy()
+            for _ in range(10):
+                step()
+            replayed = positions().copy()
+            model, engine, _ = peers._newton_scene(newton, N, solver)
+            a, b = model.state(), model.state()
+            for _ in range(10):
+                a.clear_forces()
+                engine.step(a, b, None, None, dt)
+                a, b = b, a
+            launched = a.particle_q.numpy()
+        np.testing.assert_array_equal(start, peers.grid_points(N).astype(np.float32))
+        assert np.abs(replayed - start).max() > 1e-4        # it moved
+        np.testing.assert_array_equal(replayed, launched)
 
 
 def test_mujoco_membrane_matches_the_springs():
@@ -163,6 +232,13 @@ def test_missing_package_is_an_import_error_with_the_pip_command(monkeypatch):
     assert 'mujoco' not in peers.available()
 
 
+def test_newton_peers_missing_is_an_import_error_with_the_pip_command(monkeypatch):
+    monkeypatch.setitem(sys.modules, 'newton', None)
+    with pytest.raises(ImportError, match=r'pip install newton==1\.8\.0 warp-lang==1\.19\.0'):
+        peers.run('newton_vbd', N, 0.01)
+    assert not {'newton_vbd', 'newton_semi_implicit'} & set(peers.available())
+
+
 def test_scene_helpers():
     """The scene every peer builds: our geometry, masses, pins and sampling."""
     x = peers.grid_points(N)
@@ -176,6 +252,32 @@ def test_scene_helpers():
     shuffled = np.random.default_rng(0).permutation(N * N)
     order = peers.grid_order(x[shuffled], N)
     assert np.array_equal(x[shuffled][order], x)
+
+
+def test_spring_grid_and_newton_colors():
+    """Our springs as the Newton peers get them, and a VBD colouring none of them violates."""
+    pairs, stiffness = peers.spring_grid(N)
+    x = peers.grid_points(N)
+    cells = np.linalg.norm(x[pairs[:, 0]] - x[pairs[:, 1]], axis=1) * (N - 1) / peers.SIZE
+    # structural, then shear (both diagonals of every cell), then bending (two apart)
+    counts = [2 * N * (N - 1), 2 * (N - 1) ** 2, 2 * N * (N - 2)]
+    assert len(pairs) == len(stiffness) == sum(counts)
+    assert len({tuple(sorted(p)) for p in pairs.tolist()}) == len(pairs)   # no duplicates
+    start = 0
+    for count, k, rest in zip(counts, (peers.K_STRUCT, peers.K_SHEAR, peers.K_BEND),
+                              (1.0, np.sqrt(2), 2.0)):
+        np.testing.assert_allclose(cells[start:start + count], rest)
+        np.testing.assert_array_equal(stiffness[start:start + count], k)
+        start += count
+    np.testing.assert_array_equal(pairs[:counts[0]], peers.structural_edges(N))
+
+    groups = peers.newton_colors(N)
+    color = np.full(N * N, -1)
+    for c, group in enumerate(groups):
+        color[group] = c
+    assert len(groups) == 9 and np.all(color >= 0)
+    assert sum(len(g) for g in groups) == N * N
+    assert np.all(color[pairs[:, 0]] != color[pairs[:, 1]])
 
 
 def test_a_blow_up_ends_the_run_as_not_finite():

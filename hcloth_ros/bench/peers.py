@@ -1,5 +1,5 @@
 """
-Our benchmark scene run in peer simulators (MuJoCo, PyBullet), for cost and plausibility.
+Our benchmark scene run in peer simulators (MuJoCo, PyBullet, Newton), for cost and plausibility.
 
 The scene is the one our engine benchmarks: a 1 m x 1 m cloth of 0.2 kg on an n x n grid,
 horizontal at z = 1.5 m, point ``(i, j)`` at ``x = -0.5 + i/(n-1)``, ``y = j/(n-1)``;
@@ -9,18 +9,25 @@ released at rest. Every result lists points in that order, flat index ``i * n + 
 
 Each peer is an optional extra, not a dependency::
 
-    pip install mujoco==3.14.0 pybullet==3.2.7
+    pip install mujoco==3.14.0 pybullet==3.2.7 newton==1.8.0 warp-lang==1.19.0
 
-Only the stepping loop is timed (model building and one warm-up step on a throwaway copy
-of the scene are not), on one thread: neither engine starts worker threads here (MuJoCo
-steps single-threaded unless a thread pool is attached with ``mju_threadpool``, which we
-never do; the PyPI PyBullet wheel is built without threading or OpenMP). ``cpu_seconds``
-beside ``wall_seconds`` lets a reader check that: on one thread they are about equal.
+Newton is two peers, one per cloth solver: ``newton_vbd`` (Vertex Block Descent, implicit)
+and ``newton_semi_implicit`` (symplectic Euler, explicit).
+
+Only the stepping loop is timed (model building, kernel compilation and one warm-up step on
+a throwaway copy of the scene are not), on one thread: no engine starts worker threads here
+(MuJoCo steps single-threaded unless a thread pool is attached with ``mju_threadpool``,
+which we never do; the PyPI PyBullet wheel is built without threading or OpenMP; Newton
+runs on Warp's CPU device, whose kernels are a plain loop in the calling thread).
+``cpu_seconds`` beside ``wall_seconds`` lets a reader check that: on one thread they are
+about equal.
 
 What each engine can and cannot copy of our springs is in its ``material`` string and in
 the comments of its builder: MuJoCo has no springs for 2D flexes, so its continuum
 membrane is fitted to our spring grid; PyBullet has springs but links every pair two
-links apart as a bending spring and spreads the mass evenly over the nodes.
+links apart as a bending spring and spreads the mass evenly over the nodes; Newton's VBD
+and semi-implicit solvers both take arbitrary springs and per-particle masses, so they get
+our spring grid and masses verbatim.
 """
 
 import contextlib
@@ -33,6 +40,7 @@ import os
 import sys
 import tempfile
 import time
+import warnings
 
 import numpy as np
 
@@ -46,11 +54,18 @@ K_STRUCT = 1000.0     # N/m, structural springs (grid neighbours)
 K_SHEAR = 1000.0      # N/m, shear springs (both diagonals of every cell)
 K_BEND = 100.0        # N/m, bending springs (two apart along a grid axis)
 
-PIP_SPEC = {'mujoco': 'mujoco==3.14.0', 'pybullet': 'pybullet==3.2.7'}
+# pip command per Python package; Newton pins its Warp too (it accepts warp-lang>=1.17).
+PIP_SPEC = {'mujoco': 'mujoco==3.14.0', 'pybullet': 'pybullet==3.2.7',
+            'newton': 'newton==1.8.0 warp-lang==1.19.0'}
+# The Python package of each peer whose name is not its package's.
+PEER_PACKAGE = {'newton_vbd': 'newton', 'newton_semi_implicit': 'newton'}
 
 # MuJoCo: the shell thickness only sets the plate bending stiffness, since the membrane
 # stiffness is fixed as the product E*t (see mujoco_membrane). 1 mm is cloth-like.
 MUJOCO_THICKNESS = 1e-3   # m
+
+# Newton's VBD: Gauss-Seidel sweeps over the vertex colours per step, its default number.
+NEWTON_VBD_ITERATIONS = 10
 
 
 # --- scene geometry, shared by every peer ------------------------------------------------
@@ -88,6 +103,26 @@ def structural_edges(n):
     along_x = np.stack([idx[:-1, :].ravel(), idx[1:, :].ravel()], axis=1)
     along_y = np.stack([idx[:, :-1].ravel(), idx[:, 1:].ravel()], axis=1)
     return np.concatenate([along_x, along_y])
+
+
+def spring_grid(n):
+    """
+    Our engine's springs: index pairs ``(m, 2)`` and stiffnesses (N/m) ``(m,)``.
+
+    Structural (grid neighbours, K_STRUCT), shear (both diagonals of every cell, K_SHEAR)
+    and bending (two apart along a grid axis, K_BEND); each rest length is the pair's
+    distance in the flat grid.
+    """
+    idx = np.arange(n * n).reshape(n, n)
+    shear = [np.stack([idx[:-1, :-1].ravel(), idx[1:, 1:].ravel()], axis=1),
+             np.stack([idx[1:, :-1].ravel(), idx[:-1, 1:].ravel()], axis=1)]
+    bend = [np.stack([idx[:-2, :].ravel(), idx[2:, :].ravel()], axis=1),
+            np.stack([idx[:, :-2].ravel(), idx[:, 2:].ravel()], axis=1)]
+    families = [(structural_edges(n), K_STRUCT), (np.concatenate(shear), K_SHEAR),
+                (np.concatenate(bend), K_BEND)]
+    pairs = np.concatenate([f for f, _ in families])
+    stiffness = np.concatenate([np.full(len(f), k) for f, k in families])
+    return pairs, stiffness
 
 
 def sample_steps(dt, duration, sample_every):
@@ -154,7 +189,7 @@ def _silenced_output():
 
 
 def _import(name):
-    """Import a peer's package, or raise ImportError naming the pip command."""
+    """Import a peer's package (by package name), or raise ImportError naming the pip command."""
     try:
         if sys.modules.get(name) is not None:
             return sys.modules[name]
@@ -454,9 +489,162 @@ def run_pybullet(n, dt, duration=2.0, sample_every=1 / 30):
     return result
 
 
+# --- Newton ----------------------------------------------------------------------------------
+
+def newton_colors(n):
+    """
+    Vertex colouring for Newton's VBD: lists of flat indices, no spring within a colour.
+
+    VBD updates the points of one colour at a time, in parallel on a GPU, so no two points
+    of a colour may share an element. Newton's own ``ModelBuilder.color`` looks only at
+    triangles, bending edges and tetrahedra, not at springs, so we colour by
+    ``(i mod 3, j mod 3)``: every spring of spring_grid joins points 1 or 2 apart along
+    an axis or diagonally, which always differ in one of those. Nine colours.
+    """
+    i, j = np.divmod(np.arange(n * n), n)
+    color = (i % 3) * 3 + j % 3
+    return [np.flatnonzero(color == c) for c in range(9) if np.any(color == c)]
+
+
+def _newton_scene(newton, n, solver):
+    """
+    Build the scene on Warp's CPU device; return (model, engine, order).
+
+    ``engine`` is the Newton solver named by ``solver``, ``order`` as from grid_order.
+
+    Both of Newton's cloth solvers take springs (``Model.spring_*``: Hooke springs on the
+    distance, rest length from the initial positions) besides their FEM triangles and
+    dihedral bending edges, so we give them our springs one for one (spring_grid), with our
+    area-lumped masses (particles added one by one with their mass) and no triangles or
+    bending edges at all. Newton's ``add_cloth_grid`` would not do: it splits each cell
+    along one diagonal only, lumps the mass by triangle area (so a cell's corners get
+    unequal shares) and its optional springs are that mesh's edges and bending pairs, not
+    ours. A fitted continuum membrane (VBD's StVK/Neo-Hookean triangles with tri_ke/tri_ka
+    and edge_ke bending) would also lose our grid's anisotropy (see mujoco_membrane), which
+    springs keep exactly. No damping (spring kd 0), particle radius 0 (which leaves the
+    model without its particle hash grid: no particle-particle contact), no shapes, so
+    nothing collides. The pinned corners are kinematic as in ``add_cloth_grid``'s
+    ``fix_*``: mass 0 and the ACTIVE flag cleared.
+    """
+    builder = newton.ModelBuilder(up_axis=newton.Axis.Z, gravity=(0.0, 0.0, -GRAVITY))
+    pinned = np.zeros(n * n, dtype=bool)
+    pinned[pinned_indices(n)] = True
+    active = int(newton.ParticleFlags.ACTIVE)
+    builder.add_particles(grid_points(n).tolist(), [(0.0, 0.0, 0.0)] * (n * n),
+                          np.where(pinned, 0.0, lumped_masses(n)).tolist(),
+                          radius=[0.0] * (n * n),
+                          flags=[0 if p else active for p in pinned])
+    pairs, stiffness = spring_grid(n)
+    for (i, j), k in zip(pairs.tolist(), stiffness.tolist()):
+        builder.add_spring(i, j, k, 0.0, 0.0)
+    if solver == 'vbd':
+        builder.set_coloring(newton_colors(n))
+    model = builder.finalize(device='cpu')
+    if model.particle_grid is not None:
+        raise RuntimeError('Newton built a particle contact grid for the cloth')
+    if solver == 'vbd':
+        # Implicit Euler, minimised by NEWTON_VBD_ITERATIONS sweeps of per-vertex Newton
+        # steps; self-contact off (the default), so no collision detection either.
+        engine = newton.solvers.SolverVBD(model, iterations=NEWTON_VBD_ITERATIONS,
+                                          particle_enable_self_contact=False)
+    else:
+        # Symplectic Euler (v += a dt, then x += v dt): the springs are explicit.
+        engine = newton.solvers.SolverSemiImplicit(model, enable_tri_contact=False)
+    order = grid_order(model.particle_q.numpy().astype(float), n)
+    return model, engine, order
+
+
+def _newton_stepper(wp, model, engine, dt):
+    """
+    Return (step, positions) for a built scene, its steps recorded as CPU graphs.
+
+    Newton's solvers step ``state_in`` into ``state_out``; two states alternate. Each of
+    the two steps (0 into 1, 1 into 0) is recorded once as a Warp graph, which on the CPU
+    Warp replays in C++ (``capture_launch``), without the Python of a launch per kernel:
+    that is how Newton's own examples step. A VBD step is 273 kernel launches, a
+    semi-implicit one 2 behind a lot of Python; replayed, either steps about 20 times
+    faster than launched from Python at n = 9, 3-4 times at n = 33. Recording runs
+    nothing, so the states are still at t = 0 afterwards. Forces accumulate in
+    ``particle_f``, so every step clears them first, as Newton's examples do.
+    """
+    states = [model.state(), model.state()]
+    control = model.control()
+    graphs = []
+    for a, b in ((0, 1), (1, 0)):
+        with wp.ScopedCapture(device='cpu') as capture:
+            states[a].clear_forces()
+            engine.step(states[a], states[b], control, None, dt)
+        graphs.append(capture.graph)
+    current = [0]
+
+    def step():
+        wp.capture_launch(graphs[current[0]])
+        current[0] ^= 1
+
+    def positions():
+        return states[current[0]].particle_q.numpy()
+
+    return step, positions
+
+
+def _run_newton(solver, n, dt, duration, sample_every):
+    """
+    Run the scene in Newton with ``solver`` ('vbd' or 'semi_implicit'); see run().
+
+    Warp compiles each kernel module to C++ on its first use on a device (seconds per
+    module; cached on disk, in Warp's kernel cache: ``$WARP_CACHE_PATH`` or else the user
+    cache, ``~/.cache/warp/<version>``) and prints its progress: that happens in the
+    silenced, untimed warm-up on a throwaway copy of the scene. Newton computes in float32.
+    Python warnings from Newton or Warp are collected into the result.
+    """
+    newton = _import('newton')
+    wp = _import('warp')
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter('always')
+        with _silenced_output():
+            wp.init()                          # prints a banner, on a CPU-only host a warning
+        with wp.ScopedDevice('cpu'):
+            # Warm-up: one step of a throwaway copy of the scene, not timed; it compiles
+            # (or loads from the cache) every kernel the step launches.
+            with _silenced_output():
+                warm_step, _ = _newton_stepper(wp, *_newton_scene(newton, n, solver)[:2], dt)
+                warm_step()
+                model, engine, order = _newton_scene(newton, n, solver)
+                step, positions = _newton_stepper(wp, model, engine, dt)
+            result = _simulate(step, lambda: positions()[order].astype(float),
+                               n, dt, duration, sample_every)
+    springs = (f'our springs one for one as Newton springs: {K_STRUCT:g} N/m structural, '
+               f'{K_SHEAR:g} N/m on both diagonals of every cell, {K_BEND:g} N/m bending '
+               f'two apart along an axis; no FEM triangles or dihedral bending; no damping')
+    if solver == 'vbd':
+        method = (f'SolverVBD: implicit Euler by {NEWTON_VBD_ITERATIONS} vertex block '
+                  f'descent iterations per step (Newton default), 9-colour grid colouring')
+    else:
+        method = 'SolverSemiImplicit: symplectic Euler, springs explicit'
+    result.update(
+        peer=f'newton_{solver}', version=_version('newton'),
+        material=(f'{springs}; {method}; float32; Warp {_version("warp-lang")} CPU, '
+                  f'steps replayed as CPU graphs'),
+        mass_distribution='area-lumped as ours',
+        threads='1 (Warp CPU kernels are a serial loop in the calling thread)',
+        warnings=sorted({str(w.message).strip() for w in caught}))
+    return result
+
+
+def run_newton_vbd(n, dt, duration=2.0, sample_every=1 / 30):
+    """Run the scene in Newton's VBD cloth solver (our springs, implicit); see run()."""
+    return _run_newton('vbd', n, dt, duration, sample_every)
+
+
+def run_newton_semi_implicit(n, dt, duration=2.0, sample_every=1 / 30):
+    """Run the scene in Newton's semi-implicit solver (our springs, explicit); see run()."""
+    return _run_newton('semi_implicit', n, dt, duration, sample_every)
+
+
 # --- the API the benchmark uses --------------------------------------------------------------
 
-PEERS = {'mujoco': run_mujoco, 'pybullet': run_pybullet}
+PEERS = {'mujoco': run_mujoco, 'pybullet': run_pybullet, 'newton_vbd': run_newton_vbd,
+         'newton_semi_implicit': run_newton_semi_implicit}
 
 
 def available():
@@ -464,7 +652,7 @@ def available():
     names = []
     for name in PEERS:
         try:
-            _import(name)
+            _import(PEER_PACKAGE.get(name, name))
         except ImportError:
             continue
         names.append(name)
