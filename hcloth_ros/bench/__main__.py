@@ -120,6 +120,9 @@ def run(plan, out, sections=SECTIONS, show_progress=True):
     results.update(plan=plan.__dict__, machine={
         'cpus': os.cpu_count(), 'processor': platform.processor() or platform.machine(),
         'python': platform.python_version(), 'numba': numba.__version__, 'numba_threads': 1})
+    # the machine is shared: costs are only as good as its idle cores (1-minute averages)
+    loads = results.setdefault('load_average', {})
+    loads[','.join(sections)] = {'start': os.getloadavg()[0]}
     progress = Progress(_estimate(plan, sections), show_progress)
     try:
         if 'accuracy' in sections:
@@ -163,6 +166,7 @@ def run(plan, out, sections=SECTIONS, show_progress=True):
     finally:
         progress.close()
     results.setdefault('wall_seconds', {})[','.join(sections)] = time.perf_counter() - started
+    loads[','.join(sections)]['end'] = os.getloadavg()[0]
     results = _jsonable(results)
     with open(os.path.join(out, 'results.json'), 'w') as f:
         json.dump(results, f, indent=1)

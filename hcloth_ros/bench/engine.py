@@ -15,17 +15,19 @@ name       level 0     levels  finest points
 ``65k``    9 x 9       6       257 x 257 = 66,049
 =========  ==========  ======  =================
 
-For each size: ``explicit`` and ``approx`` on the finest level, ``hierarchical`` over all
-levels, and ``implicit`` (backward Euler, slow) on the smallest size only, from rest,
-with few steps. Each configuration first runs ``--warmup`` untimed steps, then
-``--steps`` timed steps (fewer if they would exceed ``--budget`` seconds); median and p90
-of the wall time of ``solver.step`` are reported, with steps per second, refused steps
+For each size: ``explicit`` and ``approx`` on the finest level, ``hierarchical`` and
+``multigrid`` (the node's default: level 1 solved, eq. 7 above) over all levels, and
+``implicit`` (backward Euler, slow) on the smallest size only, from rest, with few steps.
+Each configuration first runs ``--warmup`` untimed steps, then ``--steps`` timed steps
+(fewer if they would exceed ``--budget`` seconds); median and p90 of the wall time of
+``solver.step`` are reported, with steps per second, refused steps
 (a refused step did all its work, then kept the old state: at dt = 1/60 the explicit
 and single-level solvers exceed the blow-up strain here) and the mean number of
 strain-limiting sweeps per level. On the largest size two variants of the hierarchical
 step show what strain limiting costs: without it, and with 100 sweeps allowed on every
-refinement level instead of the default 4.
-A kernel-by-kernel breakdown of the hierarchical step is taken on the largest size by
+refinement level instead of the default 4; two of ``multigrid`` what solving more levels
+costs: up to 65 x 65 (``accurate_level`` 3, the node's 257 x 257 target) and on every
+level. A kernel-by-kernel breakdown of the hierarchical step is taken on the largest size by
 timing every kernel call the solver makes.
 
 Cold start: a fresh interpreter with an empty ``NUMBA_CACHE_DIR`` (a temporary directory)
@@ -115,7 +117,7 @@ def run_config(size, solver_name, steps, warmup, budget, options=None, label=Non
         'steps_per_second': float(1e3 / np.median(ms)),
         'strain_sweeps_mean': {k: float(np.mean(v)) for k, v in sorted(sweeps.items())},
         'wall_seconds': time.perf_counter() - t_start}
-    if solver_name == 'implicit':
+    if solver_name in ('implicit', 'multigrid'):
         result.update(newton_iterations_mean=float(np.mean(newton)),
                       cg_iterations_mean=float(np.mean(cg)))
     return result
@@ -209,13 +211,23 @@ print(json.dumps(dict(import_s=t1 - t0, warm_up_s=warm, total_s=time.perf_counte
                       threads=numba.get_num_threads())))
 """
 
-# What a cold start compiles: the node's default (hierarchical, one thread, no
-# recording) and everything (every solver, serial and parallel builds, the energy), each
-# in one process and spread over the default number of processes.
+# Variants timed on the largest size: what hierarchical's step costs besides strain
+# limiting and with more sweeps allowed; what solving more levels costs multigrid (up to
+# 65 x 65, the node's 257 x 257 target, and all of them).
+VARIANTS = {
+    'hierarchical': (('hierarchical, no strain lim', {'strain_limit': None}),
+                     ('hierarchical, 100 refine sw.', {'strain_refine_iterations': 100})),
+    'multigrid': (('multigrid, to level 3', {'accurate_level': 3}),
+                  ('multigrid, every level', {'accurate_level': None})),
+}
+
+# What a cold start compiles: the node's default (multigrid, one thread, no recording)
+# and everything (every solver, serial and parallel builds, the energy), each in one
+# process and spread over the default number of processes.
 COLD_CONFIGS = {
-    'node default, 1 process': {'solvers': ['hierarchical'], 'parallel': False,
+    'node default, 1 process': {'solvers': ['multigrid'], 'parallel': False,
                                 'energy': False, 'processes': 1},
-    'node default': {'solvers': ['hierarchical'], 'parallel': False, 'energy': False},
+    'node default': {'solvers': ['multigrid'], 'parallel': False, 'energy': False},
     'every kernel, 1 process': {'parallel': True, 'processes': 1},
     'every kernel': {'parallel': True},
 }
@@ -272,7 +284,7 @@ def main(argv=None):
         description='Milliseconds per step of the cloth solvers (see module docstring).')
     parser.add_argument('--sizes', default=','.join(SIZES),
                         help=f'comma-separated subset of {list(SIZES)} (default: all)')
-    parser.add_argument('--solvers', default='explicit,approx,hierarchical,implicit',
+    parser.add_argument('--solvers', default='explicit,approx,hierarchical,multigrid,implicit',
                         help='comma-separated solvers (implicit runs on the smallest '
                              'size only)')
     parser.add_argument('--steps', type=int, default=200, help='timed steps per config')
@@ -340,18 +352,16 @@ def main(argv=None):
             r['threading_layer'] = numba.threading_layer()
             configs.append(r)
             print(_fmt(r), flush=True)
-    if 'hierarchical' in solver_names and sizes and not args.no_variants:
-        # what the step costs besides strain limiting, and with fewer sweeps allowed
-        largest = max(sizes, key=lambda s: _side(**SIZES[s]))
-        for label, options in (('hierarchical, no strain lim', {'strain_limit': None}),
-                               ('hierarchical, 100 refine sw.',
-                                {'strain_refine_iterations': 100})):
-            r = run_config(largest, 'hierarchical', args.steps, args.warmup, args.budget,
-                           options, label)
-            r['threads'] = numba.get_num_threads()
-            r['threading_layer'] = numba.threading_layer()
-            configs.append(r)
-            print(_fmt(r), flush=True)
+    for name, variants in VARIANTS.items():
+        if name in solver_names and sizes and not args.no_variants:
+            largest = max(sizes, key=lambda s: _side(**SIZES[s]))
+            for label, options in variants:
+                r = run_config(largest, name, args.steps, args.warmup, args.budget, options,
+                               label)
+                r['threads'] = numba.get_num_threads()
+                r['threading_layer'] = numba.threading_layer()
+                configs.append(r)
+                print(_fmt(r), flush=True)
     results['configs'] = configs
 
     if not args.no_breakdown and sizes:

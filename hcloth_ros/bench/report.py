@@ -120,7 +120,18 @@ def markdown(results):
              ('Explicit step limit', explicit_check_table),
              ('Violent grasps', violent_table), ('Peers', peers_table),
              ("The paper's figures", paper_tables)]
-    return '\n\n'.join(f'## {title}\n\n{fn(results)}' for title, fn in parts) + '\n'
+    return (_machine(results) + '\n\n'
+            + '\n\n'.join(f'## {title}\n\n{fn(results)}' for title, fn in parts) + '\n')
+
+
+def _machine(results):
+    """Describe the machine and its load while each section ran (costs need idle cores)."""
+    m = results.get('machine', {})
+    loads = '; '.join(f'{sections}: {v.get("start", 0):.2f} -> {v.get("end", 0):.2f}'
+                      for sections, v in results.get('load_average', {}).items())
+    return (f'Machine: {m.get("cpus")} CPUs ({m.get("processor")}), Python {m.get("python")}, '
+            f'numba {m.get("numba")} on {m.get("numba_threads")} thread; load average (1 min) '
+            f'at the start and end of each run: {loads or "not recorded"}.')
 
 
 def main(argv=None):
