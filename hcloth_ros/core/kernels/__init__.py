@@ -27,6 +27,19 @@ backward Euler's system ``(M - h^2 J) dv = b`` and its CG solve
     ``implicit.conjugate_gradient``, ``implicit.spring_forces``; ``ref_system_apply``;
     ``test_kernel_equivalence::test_system_apply_and_cg``,
     ``test_implicit::test_converged_step_satisfies_backward_euler``
+BDF2 (backward Euler on the first step): the step's anchor ``x^, v^``, the Newton residual
+``M (v+ - v^) - beta F(x^ + beta v+, v+)`` (F: springs, spring damping, air drag, gravity)
+and the new positions
+    ``bdf2.anchor``, ``bdf2.newton_residual``, ``bdf2.new_positions``,
+    ``bdf2.start_velocity``; ``test_multigrid::test_observed_order_when_the_step_halves``,
+    ``test_multigrid::test_released_mid_swing_the_centre_of_mass_falls_at_g``,
+    ``test_multigrid::test_air_drag_gives_the_terminal_velocity``
+the Newton system ``M + beta D_air + beta^2 K + beta C`` on every level and its
+V-cycle-preconditioned CG solve
+    ``multigrid.assemble_hierarchy``, ``multigrid.multigrid_cg``, ``multigrid.inject``;
+    the dense matrix of ``implicit.system_apply``;
+    ``test_multigrid::test_stored_blocks_give_backward_eulers_matrix``,
+    ``test_multigrid::test_v_cycle_preconditioner_on_a_33_grid``
 strain limiting (Provot 1995)
     ``strain.strain_limit``; ``ref_strain_limit``; ``test_kernel_equivalence::test_strain_*``
 contact with static obstacles
