@@ -17,7 +17,8 @@ setup(
     zip_safe=True,
     maintainer='hcloth_ros maintainers',
     maintainer_email='maintainers@hcloth-ros.dev',
-    description='Real-time hierarchical mass-spring cloth simulation for ROS 2.',
+    description='Real-time mass-spring cloth simulation for ROS 2 on a level hierarchy '
+                '(BDF2 with multigrid-preconditioned CG, or the hierarchical method).',
     license='Apache-2.0',
     extras_require={
         'test': ['pytest'],

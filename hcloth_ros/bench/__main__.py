@@ -20,7 +20,7 @@ import os
 import platform
 import time
 
-from hcloth_ros.bench import accuracy, equilibrium, paper, report, stability, versus
+from hcloth_ros.bench import accuracy, equilibrium, paper, peers, report, stability, versus
 from hcloth_ros.bench.plan import FULL, Plan, PLANS, QUICK, TINY
 from hcloth_ros.core import warm_up
 import numba
@@ -96,13 +96,15 @@ def _estimate(plan, sections):
     if 'accuracy' in sections:
         total += len(accuracy.jobs(plan)) + len(plan.scenarios) * len(plan.sizes)
     if 'equilibrium' in sections:
-        total += sum(1 + len(equilibrium.methods(n)) for n in plan.equilibrium_sizes)
+        total += sum(1 + sum(n <= m.max_n for m in equilibrium.methods(n))
+                     for n in plan.equilibrium_sizes)
     if 'stability' in sections:
         total += len(stability.map_jobs(plan)) + 3 * len(stability.violent_methods(9))
     if 'paper' in sections:
         total += 5 + 2 + (4 if plan.fig4 else 0)
     if 'peers' in sections:
-        total += 10 * len(plan.sizes)
+        # ours and each peer try up to 8 steps of the ladder on the sizes up to 33
+        total += sum(n <= 33 for n in plan.sizes) * (3 + len(peers.PEERS)) * 4
     return total
 
 

@@ -11,8 +11,9 @@ profile for large clouds in both processes, while a second process subscribes to
 ``cloth/points``. When the node stops it logs its tick statistics (p50/p99 of the solver
 step, message packing, publishing, recording and the whole tick, the real-time factor and
 the levels simulated); this script prints them with the subscriber's receive rate, over
-every tick and over the ticks that simulated every level (the node runs fewer before the
-subscriber connects and after its governor sheds levels: the count says how many).
+every tick and over the ticks that simulated the most levels seen (the node runs fewer
+before the subscriber connects and after its governor sheds levels: the count says how
+many, the level count which).
 
     python -m hcloth_ros.bench.node --sizes '' --first-start 3
 

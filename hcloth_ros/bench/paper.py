@@ -23,7 +23,8 @@ def fig3_runs(plan, progress):
 
     The cloth has 9 x 9 level 0 and ``plan.paper_levels`` levels. The cases, with the
     paper's literal gravity: (a) hierarchical, (b) the coarse mesh alone, (c) the fine
-    mesh with single-level eq. 6; plus our default (exact gravity) and the reference.
+    mesh with single-level eq. 6; plus the hierarchy with exact gravity (``external``'s
+    default) and the reference.
     """
     levels = plan.paper_levels
     n = 8 * 2 ** (levels - 1) + 1
@@ -35,7 +36,7 @@ def fig3_runs(plan, progress):
          1 / 60),
         ('(c) fine mesh, approx literal (one level)', 'approx', n, 1,
          {'external': 'literal'}, 1 / 60),
-        ('hierarchical, exact gravity (our default)', 'hierarchical', n, levels, {}, 1 / 60),
+        ('hierarchical, exact gravity', 'hierarchical', n, levels, {}, 1 / 60),
         ('reference (explicit, small step)', 'explicit', n, 1, {'strain_limit': None},
          reference_dt(n)),
     ]
@@ -96,8 +97,8 @@ def fig6_runs(plan, progress):
     """
     Run Fig. 6: contraction resistance all 1 against 0.5 on the coarse levels.
 
-    The paper compares (1, 1, 1, 1) against (0.5, 0.5, 1, 1). Hierarchical default on the
-    swinging cloth.
+    The paper compares (1, 1, 1, 1) against (0.5, 0.5, 1, 1): ``hierarchical`` (exact
+    gravity) on the swinging cloth.
     """
     levels = plan.paper_levels
     n = 8 * 2 ** (levels - 1) + 1
@@ -149,7 +150,7 @@ def chart_fig6(n, results, path):
 
 def fig4_timing(progress, seconds=1.0, dt=1 / 60):
     """
-    Time the median step of the default solver on the grids nearest the paper's 8192 points.
+    Time the median step of ``hierarchical`` on the grids nearest the paper's 8192 points.
 
     The two grids are 89 x 89 = 7921 and 65 x 129 = 8385 points; one and two threads.
     """

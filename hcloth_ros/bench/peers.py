@@ -56,7 +56,7 @@ K_BEND = 100.0        # N/m, bending springs (two apart along a grid axis)
 
 # pip command per Python package; Newton pins its Warp too (it accepts warp-lang>=1.17).
 PIP_SPEC = {'mujoco': 'mujoco==3.14.0', 'pybullet': 'pybullet==3.2.7',
-            'newton': 'newton==1.8.0 warp-lang==1.19.0'}
+            'newton': 'newton==1.8.0 warp-lang==1.19.0', 'warp': 'warp-lang==1.19.0'}
 # The Python package of each peer whose name is not its package's.
 PEER_PACKAGE = {'newton_vbd': 'newton', 'newton_semi_implicit': 'newton'}
 

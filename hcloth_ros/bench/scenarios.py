@@ -44,16 +44,17 @@ def fits(n, levels):
         return False
 
 
-def build_model(n, levels=1, k=1000.0, contraction=None):
+def build_model(n, levels=1, k=1000.0, contraction=None, scene=None):
     """
     Build the benchmark cloth, finest ``n x n``.
 
-    Structural and shear springs ``k``, bending ``k / 10`` (N/m, the default scene's ratio).
+    Structural and shear springs ``k``, bending ``k / 10`` (N/m, the default scene's ratio);
+    no obstacles unless a ``scene`` is given.
     """
     n0 = level0_side(n, levels)
     return ClothBuilder(width=1.0, height=1.0, resolution=(n0, n0), level_count=levels,
                         total_mass=0.2, k_struct=k, k_shear=k, k_bend=k / 10,
-                        contraction=contraction,
+                        contraction=contraction, scene=scene,
                         placement=Placement((-0.5, 0.0, 1.5), (1, 0, 0), (0, 1, 0))).finalize()
 
 

@@ -196,10 +196,15 @@ class MultigridSolver(HierarchicalSolver):
         """Advance ``state`` by ``dt`` (see :meth:`Solver.step`); keeps BDF2's history."""
         h = float(dt)
         top = self.solved_level()
-        key = (h, self.integrator, self.finest_level, state.time)
+        # which points are held: a pin or grasp that lets go (or takes hold) changes the
+        # forces the history was made under (BDF2 through a released pin put the centre of
+        # mass up to 80 % off g in the first steps)
+        held = (control.holds(top).kind != FREE).tobytes()
+        key = (h, self.integrator, self.finest_level, state.time, held)
         self._history = self.integrator == 'bdf2' and self._has_history(state, key, top)
         if not self._history:
-            # a start, a reset, another step size or an edited state: backward Euler
+            # a start, a reset, another step size, an edited state or other holds:
+            # backward Euler
             self._history_key = None
             np.copyto(self._current[top][0], state.q[top])
             np.copyto(self._current[top][1], state.qd[top])
@@ -209,7 +214,7 @@ class MultigridSolver(HierarchicalSolver):
             self._previous[top], self._current[top] = self._current[top], self._previous[top]
             np.copyto(self._current[top][0], state.q[top])
             np.copyto(self._current[top][1], state.qd[top])
-            self._history_key = (h, self.integrator, self.finest_level, state.time)
+            self._history_key = (h, self.integrator, self.finest_level, state.time, held)
         report.newton_iterations = self.newton_iterations
         report.cg_iterations = report.extra.get('cg_iterations', 0)
         return report
@@ -246,9 +251,10 @@ class MultigridSolver(HierarchicalSolver):
         """
         Table 1 on level k (constraint C, eq. 7), the displacement correction, then post.
 
-        Momentum is matched only with nothing held and no obstacles: an obstacle's push
-        changes the momentum (on the table scene, matching after contact moved 104 finest
-        points back into the table; before contact, the finest springs ran away).
+        Momentum is matched only with nothing held and no obstacle touched this step: an
+        obstacle's push changes the momentum (on the table scene, matching after contact
+        moved 104 finest points back into the table; before contact, the finest springs
+        ran away).
         """
         self._eq7(k, state, holds, h)
         # what the coarser level moved beyond h v+, prolonged onto the free inserted points
@@ -260,8 +266,7 @@ class MultigridSolver(HierarchicalSolver):
         fine *= holds.kind == FREE       # held points are where their holds put them
         self._q[k] += fine
         self._post(k, state, holds, h, True)
-        scene = self.model.scene
-        if not holds.kind.any() and (scene is None or scene.empty):
+        if not holds.kind.any() and not self._touched:
             self._match_momentum(k, state, h)
 
     def _match_momentum(self, k, state, h):

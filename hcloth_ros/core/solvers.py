@@ -120,6 +120,7 @@ class Solver:
         self._scratch = [np.zeros(s) for s in shapes]
         self._a = [np.zeros(s) for s in shapes]
         self._dinv = {}
+        self._touched = False
 
     # --- what subclasses provide ---------------------------------------------------------
     def levels(self):
@@ -180,9 +181,10 @@ class Solver:
             self._extra[f'strain_sweeps_{k}'] = sweeps
         scene = self.model.scene
         if scene is not None and not scene.empty:
-            kit.contact(self._q[k], self._qd[k], self._dv[k], state.q[k], holds.kind,
-                        inherited_fixed, scene.planes, scene.boxes, scene.spheres,
-                        scene.friction, scene.margin)
+            if kit.contact(self._q[k], self._qd[k], self._dv[k], state.q[k], holds.kind,
+                           inherited_fixed, scene.planes, scene.boxes, scene.spheres,
+                           scene.friction, scene.margin):
+                self._touched = True
 
     def step(self, state, control, dt):
         """Advance ``state`` by ``dt`` seconds under ``control``; return a StepReport."""
@@ -193,6 +195,7 @@ class Solver:
         self._use_threads(numba.get_num_threads())
         levels = self.levels()
         self._extra = {}
+        self._touched = False      # whether an obstacle pushed a point this step
         for k in levels:
             holds = control.holds(k)
             self._prescribe(k, state, holds, h)

@@ -84,12 +84,14 @@ def contact(
     Push the movable points of a level out of the obstacles.
 
     Held points and, with ``inherited_fixed``, inherited points stay where they are. Each
-    point meets the planes, then the boxes, then the spheres. The loops run over the
+    point meets the planes, then the boxes, then the spheres. Returns how many pushes it
+    made (0: the level touched nothing this step). The loops run over the
     points inside each obstacle's loop, with the test inline: a function call per point
     (array arguments and all) cost 17x the kernel.
     """
     rows, cols = hold_kind.shape
     x, y, z = q[0], q[1], q[2]
+    pushes = 0
     for p in range(planes.shape[0]):
         nx, ny, nz, offset = planes[p, 0], planes[p, 1], planes[p, 2], planes[p, 3]
         for r in range(rows):
@@ -97,6 +99,7 @@ def contact(
                 dist = x[r, c] * nx + y[r, c] * ny + z[r, c] * nz - offset - margin
                 if dist < 0.0 and _movable(hold_kind, inherited_fixed, r, c):
                     _resolve(q, qd, dv, r, c, nx, ny, nz, -dist, friction)
+                    pushes += 1
     for b in range(boxes.shape[0]):
         box = boxes[b]
         hx, hy, hz = box[3] + margin, box[4] + margin, box[5] + margin
@@ -112,6 +115,7 @@ def contact(
                     _resolve(q, qd, dv, r, c, sign if axis == 0 else 0.0,
                              sign if axis == 1 else 0.0, sign if axis == 2 else 0.0, depth,
                              friction)
+                    pushes += 1
     for s in range(spheres.shape[0]):
         cx, cy, cz, reach = spheres[s, 0], spheres[s, 1], spheres[s, 2], spheres[s, 3] + margin
         for r in range(rows):
@@ -125,3 +129,5 @@ def contact(
                     _resolve(q, qd, dv, r, c, dx / dist, dy / dist, dz / dist, pen, friction)
                 else:
                     _resolve(q, qd, dv, r, c, 0.0, 0.0, 1.0, pen, friction)
+                pushes += 1
+    return pushes
