@@ -25,10 +25,11 @@ Each configuration first runs ``--warmup`` untimed steps, then ``--steps`` timed
 and single-level solvers exceed the blow-up strain here) and the mean number of
 strain-limiting sweeps per level. On the largest size two variants of the hierarchical
 step show what strain limiting costs: without it, and with 100 sweeps allowed on every
-refinement level instead of the default 4; two of ``multigrid`` what solving more levels
-costs: up to 65 x 65 (``accurate_level`` 3, the node's 257 x 257 target) and on every
-level. A kernel-by-kernel breakdown of the hierarchical step is taken on the largest size by
-timing every kernel call the solver makes.
+refinement level instead of the default 4; three of ``multigrid`` what solving more
+levels costs: up to 65 x 65 (``accurate_level`` 3, the node's 257 x 257 target), the same
+with one strain-limiting sweep on the refined levels, and every level. Kernel-by-kernel
+breakdowns of the hierarchical step and of the multigrid step solved up to 65 x 65 are
+taken on the largest size by timing every kernel call the solver makes.
 
 Cold start: a fresh interpreter with an empty ``NUMBA_CACHE_DIR`` (a temporary directory)
 imports the engine and runs :func:`hcloth_ros.core.warm_up` for the node's default
@@ -123,9 +124,9 @@ def run_config(size, solver_name, steps, warmup, budget, options=None, label=Non
     return result
 
 
-def breakdown(size, steps, warmup):
+def breakdown(size, steps, warmup, solver_name='hierarchical', options=None):
     """
-    Time every kernel call of the hierarchical step (per kernel and level).
+    Time every kernel call of one solver's step (per kernel and level).
 
     The solver's calls go through the kernel sets ``kernels.SERIAL`` and
     ``kernels.PARALLEL``, whose attributes are wrapped here with a timer for the
@@ -137,12 +138,14 @@ def breakdown(size, steps, warmup):
     """
     from hcloth_ros.core import kernels, make_solver
     model, state, control = _scene(size)
-    solver = make_solver('hierarchical', model)
+    solver = make_solver(solver_name, model, **(options or {}))
     for _ in range(warmup):
         solver.step(state, control, DT)
     level_of = {(lv.rows, lv.cols): lv.index for lv in model.levels}
     names = ['prescribe', 'eq6_first_sweep', 'eq6_second_sweep', 'prolong', 'eq7_level',
-             'strain_limit', 'contact', 'strain_stats']
+             'strain_limit', 'contact', 'strain_stats', 'anchor', 'start_velocity',
+             'newton_residual', 'assemble_hierarchy', 'multigrid_cg', 'new_positions',
+             'inject']
     kits = (kernels.SERIAL, kernels.PARALLEL)
     originals = {(i, n): getattr(kit, n) for i, kit in enumerate(kits) for n in names}
     current = defaultdict(float)
@@ -193,7 +196,8 @@ def breakdown(size, steps, warmup):
             entry['sweeps_mean'] = float(np.mean(sweeps[k]))
             entry['ms_per_sweep'] = entry['median_ms'] / max(np.median(sweeps[k]), 1.0)
         rows.append(entry)
-    return {'size': size, 'steps': len(totals),
+    return {'size': size, 'solver': solver_name, 'options': dict(options or {}),
+            'steps': len(totals),
             'step_median_ms': float(np.median(totals) * 1e3), 'kernels': rows}
 
 
@@ -218,8 +222,14 @@ VARIANTS = {
     'hierarchical': (('hierarchical, no strain lim', {'strain_limit': None}),
                      ('hierarchical, 100 refine sw.', {'strain_refine_iterations': 100})),
     'multigrid': (('multigrid, to level 3', {'accurate_level': 3}),
+                  ('multigrid, to 3, 1 refine sw.', {'accurate_level': 3,
+                                                     'strain_refine_iterations': 1}),
                   ('multigrid, every level', {'accurate_level': None})),
 }
+
+# Steps broken down kernel by kernel on the largest size: the paper's, and multigrid solved
+# up to 65 x 65 (the node's 257 x 257 target).
+BREAKDOWNS = (('hierarchical', {}), ('multigrid', {'accurate_level': 3}))
 
 # What a cold start compiles: the node's default (multigrid, one thread, no recording)
 # and everything (every solver, serial and parallel builds, the energy), each in one
@@ -364,11 +374,14 @@ def main(argv=None):
                 print(_fmt(r), flush=True)
     results['configs'] = configs
 
-    if not args.no_breakdown and sizes:
+    results['breakdown'] = []
+    for name, options in BREAKDOWNS:
+        if args.no_breakdown or not sizes or name not in solver_names:
+            continue
         largest = max(sizes, key=lambda s: _side(**SIZES[s]))
-        print(f'hierarchical step breakdown at {largest} '
+        print(f'{name} {options or ""} step breakdown at {largest} '
               f'(median ms per step, each kernel timed around its call):', flush=True)
-        b = breakdown(largest, args.breakdown_steps, args.warmup)
+        b = breakdown(largest, args.breakdown_steps, args.warmup, name, options)
         for row in b['kernels']:
             extra = ''
             if 'sweeps_mean' in row:
@@ -379,7 +392,7 @@ def main(argv=None):
                   f" (p90 {row['p90_ms']:.3f}){extra}", flush=True)
         print(f"  step total          {b['step_median_ms']:9.3f} ms over {b['steps']} steps",
               flush=True)
-        results['breakdown'] = b
+        results['breakdown'].append(b)
 
     if not args.no_cold:
         print('cold start (fresh interpreter, import + warm_up()):', flush=True)

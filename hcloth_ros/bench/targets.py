@@ -24,9 +24,10 @@ import os
 import sys
 
 from hcloth_ros.bench import equilibrium, errors
+from hcloth_ros.bench.plan import Method
 from hcloth_ros.bench.reference import reference
 from hcloth_ros.bench.scenarios import simulate
-from hcloth_ros.core import make_solver
+
 
 DT = 1.0 / 60.0
 LEVELS = {17: 2, 33: 3, 65: 4}
@@ -62,13 +63,11 @@ def accuracy(sizes, repeats, progress=print):
 
 def rest_shape(n=33, seconds=3.0):
     """Drop of the hung cloth (m): the multigrid solver's, the energy minimum's."""
-    model = equilibrium.hanging_model(n, LEVELS[n], air_drag=1.0)
-    control, state = equilibrium.hang(model)
-    solver = make_solver('multigrid', model)
-    for _ in range(int(round(seconds / DT))):
-        if not solver.step(state, control, DT).ok:
-            raise RuntimeError('the hanging cloth blew up')
-    got = equilibrium.drop(state.points(model.level_count - 1))
+    points, _, failed = equilibrium.settle(Method('multigrid', 'multigrid', (), LEVELS[n]), n,
+                                           seconds, DT)
+    if failed:
+        raise RuntimeError(f'the hanging cloth blew up: {failed}')
+    got = equilibrium.drop(points)
     _, expected = equilibrium.reference(n)
     return {'n': n, 'drop': got, 'energy_minimum_drop': expected,
             'relative_error': got / expected - 1.0}

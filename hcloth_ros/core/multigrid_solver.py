@@ -172,8 +172,11 @@ class MultigridSolver(HierarchicalSolver):
         self._history_key = None
         self._history = False
         self._beta = None
-        # per refinement level: the masses of its inserted points (momentum matching)
-        self._inserted_mass = [None] + [lv.mass * _inserted(lv) for lv in model.levels[1:]]
+        # per refinement level: 1.0 at its inserted points (the drift correction and the
+        # momentum matching move only those) and their total mass
+        self._inserted = [None] + [_inserted(lv) for lv in model.levels[1:]]
+        self._inserted_total = [None] + [float(np.sum(lv.mass * mask)) for lv, mask in
+                                         zip(model.levels[1:], self._inserted[1:])]
 
     def _strain_limit(self, refinement):
         return self.strain_limit if refinement else self.solved_strain_limit
@@ -262,7 +265,7 @@ class MultigridSolver(HierarchicalSolver):
         np.subtract(self._q[k - 1], state.q[k - 1], out=drift)
         drift -= h * self._qd[k - 1]
         self.kernels(k).prolong(drift, fine)
-        fine *= self._inserted_mass[k] > 0
+        fine *= self._inserted[k]
         fine *= holds.kind == FREE       # held points are where their holds put them
         self._q[k] += fine
         self._post(k, state, holds, h, True)
@@ -281,9 +284,9 @@ class MultigridSolver(HierarchicalSolver):
         target = (np.einsum('drc,rc->d', self._qd[k - 1], coarse_mass)
                   - np.einsum('drc,rc->d', state.qd[k - 1], coarse_mass)
                   + np.einsum('drc,rc->d', state.qd[k], fine_mass))
-        inserted = self._inserted_mass[k]
-        shift = (target - np.einsum('drc,rc->d', self._qd[k], fine_mass)) / inserted.sum()
-        change = shift[:, None, None] * (inserted > 0)
+        shift = ((target - np.einsum('drc,rc->d', self._qd[k], fine_mass))
+                 / self._inserted_total[k])
+        change = shift[:, None, None] * self._inserted[k]
         self._qd[k] += change
         self._dv[k] += change
         self._q[k] += h * change
