@@ -93,6 +93,7 @@ class ClothSimNode(Node):
         self.stats = TickStats()
         self.period = 1.0 / self.get_parameter('rate_hz').value
         self.governor = Governor(self.period, self.top_level, floor=self.lod_level)
+        self._governing = self.get_parameter('governor').value
         self.add_post_set_parameters_callback(self._apply_parameters)
         self.timer = self.create_timer(self.period, self._tick)
         lv = self.model.level(self.top_level)
@@ -176,6 +177,11 @@ class ClothSimNode(Node):
                 self.control.set_pins(params.pin_ids(p.value))
             elif p.name == 'lod_level':
                 self.lod_level = self.governor.floor = p.value
+            elif p.name == 'governor':
+                self._governing = p.value
+                if not p.value:         # every level again, judged afresh if turned back on
+                    self.governor.cap = self.top_level
+                    self.governor.restart_grace()
             elif p.name == 'solver.dt':
                 self.dt = float(p.value)
             elif p.name == 'solver.substeps':
@@ -260,6 +266,8 @@ class ClothSimNode(Node):
         self._govern(t4 - t0)
 
     def _govern(self, tick_seconds):
+        if not self._governing:
+            return
         change = self.governor.judge(tick_seconds)
         if change == 'drop':
             self.get_logger().warning(

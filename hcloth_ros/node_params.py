@@ -27,6 +27,9 @@ NODE_PARAMS = [
           'gave the lowest tail latency with subscribers on the same 2 cores', 1, 256),
     Param('grasp_radius', 0.03, 'a closing gripper takes the points this close (m)',
           0.0, 1.0, False),
+    Param('governor', True, 'shed refinement levels while ticks overrun the period '
+          '(false: simulate every consumed level, however long a tick takes)',
+          read_only=False),
 ]
 ALL_PARAMS = params.PARAMS + NODE_PARAMS
 

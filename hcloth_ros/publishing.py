@@ -24,6 +24,7 @@ class ClothPublisher:
         self.marker_publisher = marker_publisher
         self.ns = ns
         self._markers = {}      # level -> TriangleMarker, built on first use
+        self._cloud_points = None   # float32 buffer of the last cloud's points
 
     def cloud_wanted(self):
         return self.cloud_publisher.get_subscription_count() > 0
@@ -32,7 +33,8 @@ class ClothPublisher:
         """Return ``(cloud or None, marker)`` of levels ``finest`` and ``lod``."""
         cloud = None
         if self.cloud_wanted():
-            cloud = pointcloud2(state.points_by_id(self.model, finest), self.frame_id, stamp)
+            self._cloud_points = state.points_by_id_f32(self.model, finest, self._cloud_points)
+            cloud = pointcloud2(self._cloud_points, self.frame_id, stamp)
         if lod not in self._markers:
             self._markers[lod] = TriangleMarker(self.model.grid_triangles(lod), self.frame_id,
                                                 ns=self.ns, marker_id=0)

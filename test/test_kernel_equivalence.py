@@ -23,7 +23,8 @@ and on the border.
 """
 
 from hcloth_ros.core import kernels
-from hcloth_ros.core.model import STENCIL_DC, STENCIL_DR
+from hcloth_ros.core.model import ClothBuilder, STENCIL_DC, STENCIL_DR
+from hcloth_ros.core.state import State
 import numpy as np
 import pytest
 
@@ -314,6 +315,36 @@ def test_strain_limit(rows, cols, inherited_fixed, stretch, noise, iterations, t
 
 
 @BUILDS
+@pytest.mark.parametrize('inherited_fixed', [False, True])
+@pytest.mark.parametrize('centre', [2, 32, 44, 65, 95])
+def test_strain_limit_local_stretch(centre, inherited_fixed, kit):
+    """
+    A stretch in a few rows: later sweeps skip the blocks far from it, as the reference.
+
+    97 x 91 has blocks of 22 rows and (parallel) chunk boundaries at rows 32 and 64; the
+    pulled rows sit on the border, inside a block, on a block boundary and on chunk
+    boundaries. Everything else is at its rest length, so after the first sweep only the
+    blocks near the pull can change.
+    """
+    lv = make_level(97, 91, seed=3, noise=0.0)
+    lv['kind'][:] = 0
+    q = lv['q'].copy()
+    q[2, centre - 1:centre + 1, 40:44] += 0.05
+    dv = np.zeros_like(q)
+    want = ref_strain_limit(q, lv['qd'], dv, lv['rest'], lv['kind'], inherited_fixed, 0.1,
+                            12, 1e-4, H)
+    got = q.copy(), lv['qd'].copy(), dv.copy()
+    sweeps = kit.strain_limit(*got, lv['rest'], lv['kind'], inherited_fixed, 0.1, 12, 1e-4,
+                              H, full(q.shape))
+    assert sweeps == want[3] and sweeps >= 3
+    for name, a, b in zip(('q', 'qd', 'dv'), got, want[:3]):
+        close(a, b, f'strain_limit {name}')
+    far = np.ones(97, dtype=bool)
+    far[max(centre - 12, 0):centre + 12] = False
+    assert np.array_equal(got[0][:, far], q[:, far])    # rows far from the pull stay
+
+
+@BUILDS
 @pytest.mark.parametrize('rows,cols', SHAPES)
 def test_strain_limit_nan(rows, cols, kit):
     """
@@ -376,6 +407,37 @@ def test_strain_stats(rows, cols, kit):
     vbad = qd.copy()
     vbad[2, rows - 1, cols - 1] = np.inf
     assert not kit.strain_stats(q, vbad, rest)[2]
+
+
+def test_add_prolonged_drift():
+    """Free inserted points move by the prolonged coarse drift; the others stay, bit for bit."""
+    fine = make_level(9, 11, seed=12)
+    coarse = make_level(5, 6, seed=13)
+    q_new, q_old, qd_new = coarse['q'], coarse['q'] + 0.01, coarse['qd']
+    drift = (q_new - q_old) - H * qd_new
+    inserted = np.ones((9, 11), dtype=bool)
+    inserted[::2, ::2] = False
+    moves = inserted & (fine['kind'] == 0)
+    q = fine['q'].copy()
+    kernels.add_prolonged_drift(q_new, q_old, qd_new, H, fine['kind'], q)
+    expected = fine['q'] + np.where(moves, ref_prolong(drift, 9, 11), 0.0)
+    assert np.array_equal(q, expected)
+    assert np.array_equal(q[:, ~moves], fine['q'][:, ~moves])
+
+
+def test_points_by_id_f32():
+    """The cloud's points: float64 positions narrowed to float32, point ids in order."""
+    model = ClothBuilder(resolution=(5, 4), level_count=3).finalize()
+    state = State.at_rest(model)
+    rng = np.random.default_rng(4)
+    state.q[2] += rng.normal(scale=0.3, size=state.q[2].shape)
+    state.q[2][1, 3, 5] = np.nan
+    out = state.points_by_id_f32(model, 2)
+    expected = state.points_by_id(model, 2).astype(np.float32)
+    assert out.dtype == np.float32 and out.shape == expected.shape
+    assert np.array_equal(out, expected, equal_nan=True)
+    again = state.points_by_id_f32(model, 2, out)
+    assert again is out     # the buffer is reused
 
 
 def test_prescribe():

@@ -258,6 +258,15 @@ def test_governor_drops_levels_when_ticks_overrun():
         while sim.solver.finest_level > sim.governor.cap and time.monotonic() < end:
             executor.spin_once(timeout_sec=0.01)     # applied at the next tick
         assert sim.solver.finest_level <= sim.governor.cap
+        # switched off: every level again, and overrunning ticks no longer shed any
+        result = sim.set_parameters([Parameter('governor', value=False)])[0]
+        assert result.successful
+        assert sim.governor.cap == 3
+        ticks = sim.stats.count
+        while sim.stats.count < ticks + 100 and time.monotonic() < end + 5:
+            executor.spin_once(timeout_sec=0.01)
+        assert sim.stats.count >= ticks + 100
+        assert sim.governor.cap == 3 and sim.solver.finest_level == 3
         executor.shutdown()
         sim.destroy_node()
         probe.destroy_node()

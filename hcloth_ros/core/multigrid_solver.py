@@ -261,13 +261,9 @@ class MultigridSolver(HierarchicalSolver):
         """
         self._eq7(k, state, holds, h)
         # what the coarser level moved beyond h v+, prolonged onto the free inserted points
-        drift, fine = self._scratch[k - 1], self._scratch[k]
-        np.subtract(self._q[k - 1], state.q[k - 1], out=drift)
-        drift -= h * self._qd[k - 1]
-        self.kernels(k).prolong(drift, fine)
-        fine *= self._inserted[k]
-        fine *= holds.kind == FREE       # held points are where their holds put them
-        self._q[k] += fine
+        # (held points are where their holds put them)
+        self.kernels(k).add_prolonged_drift(self._q[k - 1], state.q[k - 1], self._qd[k - 1],
+                                            h, holds.kind, self._q[k])
         self._post(k, state, holds, h, True)
         if not holds.kind.any() and not self._touched:
             self._match_momentum(k, state, h)

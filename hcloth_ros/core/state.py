@@ -1,5 +1,6 @@
 """Time-varying cloth state: positions and velocities of every level."""
 
+from hcloth_ros.core.kernels import points_by_id_f32
 import numpy as np
 
 
@@ -52,6 +53,18 @@ class State:
     def points_by_id(self, model, k):
         """Level k positions as ``(n_k, 3)`` in point-id order: row i is id i."""
         return self.points(k)[model.level(k).id_to_grid]
+
+    def points_by_id_f32(self, model, k, out=None):
+        """
+        Level k positions as float32 ``(n_k, 3)`` in point-id order, for messages.
+
+        One kernel pass (a cloud of 66k points every tick); ``out`` is reused if given.
+        """
+        lv = model.level(k)
+        if out is None or out.shape != (lv.point_count, 3) or out.dtype != np.float32:
+            out = np.empty((lv.point_count, 3), dtype=np.float32)
+        points_by_id_f32(self.q[k], lv.id_to_grid, out)
+        return out
 
     def position_of(self, model, point_id, k):
         g = model.grid_index(point_id, k)

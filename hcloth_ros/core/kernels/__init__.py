@@ -40,6 +40,9 @@ V-cycle-preconditioned CG solve
     the dense matrix of ``implicit.system_apply``;
     ``test_multigrid::test_stored_blocks_give_backward_eulers_matrix``,
     ``test_multigrid::test_v_cycle_preconditioner_on_a_33_grid``
+refinement above the BDF2 level: eq. 7, then the coarse level's drift beyond ``h v+``
+    ``eq7.eq7_level``, ``eq7.add_prolonged_drift``; ``ref_prolong``;
+    ``test_kernel_equivalence::test_add_prolonged_drift``
 strain limiting (Provot 1995)
     ``strain.strain_limit``; ``ref_strain_limit``; ``test_kernel_equivalence::test_strain_*``
 contact with static obstacles
@@ -47,6 +50,9 @@ contact with static obstacles
 strain and finiteness (the blow-up check), energy
     ``stats.strain_stats``, ``stats.energy``; inline; ``test_kernel_equivalence::
     test_strain_stats``, the energy checks of ``test_physics`` and ``test_implicit``
+a level's positions for a message (float32, point-id order)
+    ``export.points_by_id_f32``; ``State.points_by_id``;
+    ``test_kernel_equivalence::test_points_by_id_f32``
 
 The references live in ``test/test_kernel_equivalence.py`` (shifted numpy copies of the
 grid) and ``test/test_eq6_eq7.py`` (dense 3n x 3n matrices of the paper's equations).
@@ -69,8 +75,10 @@ with keyed_cache():
                                               start_velocity)
     from hcloth_ros.core.kernels.contact import contact
     from hcloth_ros.core.kernels.eq6 import eq6_first_sweep, eq6_second_sweep
-    from hcloth_ros.core.kernels.eq7 import eq7_level, eq7_level_parallel, prolong
+    from hcloth_ros.core.kernels.eq7 import (add_prolonged_drift, eq7_level,
+                                             eq7_level_parallel, prolong)
     from hcloth_ros.core.kernels.explicit import explicit_step
+    from hcloth_ros.core.kernels.export import points_by_id_f32
     from hcloth_ros.core.kernels.holds import prescribe
     from hcloth_ros.core.kernels.implicit import (conjugate_gradient,
                                                   conjugate_gradient_parallel,
@@ -84,11 +92,12 @@ with keyed_cache():
     from hcloth_ros.core.kernels.strain import (excess_threshold, strain_limit,
                                                 strain_limit_parallel)
 
-KERNELS = ('anchor', 'assemble_hierarchy', 'contact', 'conjugate_gradient', 'energy',
+KERNELS = ('add_prolonged_drift', 'anchor', 'assemble_hierarchy', 'contact',
+           'conjugate_gradient', 'energy',
            'eq6_first_sweep', 'eq6_second_sweep', 'eq7_level', 'excess_threshold',
            'explicit_step', 'inject', 'multigrid_cg', 'new_positions', 'newton_residual',
-           'prescribe', 'prolong', 'spring_forces', 'start_velocity', 'strain_limit',
-           'strain_stats', 'system_apply', 'system_diagonal')
+           'points_by_id_f32', 'prescribe', 'prolong', 'spring_forces', 'start_velocity',
+           'strain_limit', 'strain_stats', 'system_apply', 'system_diagonal')
 # Every kernel by name: SERIAL holds the serial builds, PARALLEL the parallel builds of
 # those that have one (jit.serial_and_parallel) and the serial build of the others.
 SERIAL = SimpleNamespace(**{name: globals()[name] for name in KERNELS})
@@ -106,11 +115,13 @@ def builds(rows, cols, threads):
     return PARALLEL if threads > 1 and rows * cols >= PAR_MIN_POINTS else SERIAL
 
 
-__all__ = ['anchor', 'assemble_hierarchy', 'builds', 'chunk_count', 'conjugate_gradient',
+__all__ = ['add_prolonged_drift', 'anchor', 'assemble_hierarchy', 'builds', 'chunk_count',
+           'conjugate_gradient',
            'conjugate_gradient_parallel', 'contact', 'DRIVEN', 'energy', 'eq6_first_sweep',
            'eq6_second_sweep', 'eq7_level', 'eq7_level_parallel', 'excess_threshold',
            'explicit_step', 'FREE', 'inject', 'KERNELS', 'multigrid_cg', 'new_positions',
-           'newton_residual', 'PAR_MIN_POINTS', 'PARALLEL', 'PINNED', 'prescribe', 'prolong',
-           'SERIAL', 'spring_forces', 'start_velocity', 'STENCIL_DC', 'STENCIL_DR', 'STENCIL_SIZE',
+           'newton_residual', 'PAR_MIN_POINTS', 'PARALLEL', 'PINNED', 'points_by_id_f32',
+           'prescribe', 'prolong', 'SERIAL', 'spring_forces', 'start_velocity', 'STENCIL_DC',
+           'STENCIL_DR', 'STENCIL_SIZE',
            'strain_limit', 'strain_limit_parallel', 'strain_stats', 'strain_stats_parallel',
            'system_apply', 'system_apply_parallel', 'system_diagonal']

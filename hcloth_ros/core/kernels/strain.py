@@ -19,6 +19,14 @@ corrected as soon as it is gathered. The spring terms of the row before each chu
 boundary are computed first (the neighbouring chunk may correct its rows at any time);
 a chunk applies its corrections only once the sweep is known to happen, i.e. once any
 spring over the tolerance has been seen, and the rest afterwards.
+
+Sweeps after the first skip what cannot change. A point moves only through a spring over
+its limit, so a spring can be over its limit in a sweep only if it was in the sweep before
+or one of its ends moved then. Each sweep flags the rows whose springs (first ends) are
+over with a movable end; the next sweep skips a block whose rows are at least two rows from
+every flagged row: all its terms and corrections are zero, exactly as a full sweep would
+compute them. On the 257 x 257 swing and grasp (solved up to 65 x 65) 5-15 % of the
+rows are flagged after the first sweep, at most 48 %.
 """
 
 from hcloth_ros.core.kernels.jit import JIT, serial_and_parallel
@@ -92,8 +100,10 @@ def _direction(q, movable, valid, lo, stop, end, offset, limit, threshold, terms
         tx[i] = f * dx if over else 0.0
         ty[i] = f * dy if over else 0.0
         tz[i] = f * dz if over else 0.0
-        flag[i] = 1.0 if over else 0.0
-        count += over & (a + b > 0.0) & (length >= threshold)
+        # a spring with no movable end counts nowhere: its ends' corrections are zero
+        moves = over & (a + b > 0.0)
+        flag[i] = 1.0 if moves else 0.0
+        count += moves & (length >= threshold)
     for i in range(max(stop - lo, 0), end - lo):
         tx[i] = 0.0
         ty[i] = 0.0
@@ -186,15 +196,48 @@ def _copy_terms(src, i, dst, j, n):
 
 
 @numba.njit(**JIT)
+def _any_flagged(row_flags, lo, hi):
+    """Whether a row of ``lo .. hi-1`` (clipped to the grid) is flagged."""
+    for r in range(max(lo, 0), min(hi, row_flags.size)):
+        if row_flags[r]:
+            return True
+    return False
+
+
+@numba.njit(**JIT)
+def _flag_rows(terms, pad, cols, b0, b1, row_flags):
+    """Flag rows ``b0 .. b1-1`` with a spring over its limit and a movable end."""
+    for r in range(b0, b1):
+        start = pad + (r - b0) * cols
+        total = 0.0
+        for e in range(3, TERMS, 4):
+            flags = terms[e, start:start + cols]
+            for c in range(cols):
+                total += flags[c]
+        row_flags[r] = total > 0.0
+
+
+@numba.njit(**JIT)
+def _zero_columns(array, start, n):
+    """Set ``array[:, start:start+n]`` to zero (a loop, as in :func:`_copy_terms`)."""
+    for e in range(array.shape[0]):
+        row = array[e, start:start + n]
+        for k in range(n):
+            row[k] = 0.0
+
+
+@numba.njit(**JIT)
 def _chunk_sweep(q, qd, dv, corr, movable, masks, rows, cols, r0, r1, block_rows, limit,
-                 threshold, h, edge_before, edge_after, terms, applied):
+                 threshold, h, edge_before, edge_after, terms, applied, was_over, now_over):
     """
     One sweep over rows ``r0 .. r1-1`` (see the module docstring).
 
     ``edge_before`` / ``edge_after``: the forward terms of rows ``r0 - 1`` and ``r1 - 1``
     computed before the sweep (zeros for ``r0 = 0``; unused for ``r1 = rows``).
-    ``applied``: the sweep is known to happen. Returns the springs over the tolerance
-    counted here; rows stay uncorrected while none is seen and ``applied`` is False.
+    ``applied``: the sweep is known to happen. ``was_over``: the rows the last sweep
+    flagged (all for the first); ``now_over``: this sweep's flags of rows ``r0 .. r1-1``.
+    Returns the springs over the tolerance counted here; rows stay uncorrected while none
+    is seen and ``applied`` is False.
     """
     pad = cols + 1
     _copy_terms(edge_before, 0, terms, 1, cols)
@@ -204,6 +247,17 @@ def _chunk_sweep(q, qd, dv, corr, movable, masks, rows, cols, r0, r1, block_rows
     done = r0                               # rows r0 .. done-1 are corrected
     for b0 in range(r0, r1, block_rows):
         b1 = min(b0 + block_rows, r1)
+        if not _any_flagged(was_over, b0 - 2, b1 + 1):
+            # no spring of these rows (nor of the row above) can be over its limit: zero
+            # corrections, and zero terms carried to the next block
+            _zero_columns(corr, b0 * cols, (b1 - b0) * cols)
+            for r in range(b0, b1):
+                now_over[r] = False
+            _zero_columns(terms, 1, cols)
+            if applied or count > 0:
+                _apply(q, qd, dv, corr, done * cols, b0 * cols, h)
+                done = b1
+            continue
         base = b0 * cols - pad
         # the chunk's last row reaches into the next chunk: its terms were computed first
         own = b1 if (b1 < r1 or r1 == rows) else b1 - 1
@@ -211,6 +265,7 @@ def _chunk_sweep(q, qd, dv, corr, movable, masks, rows, cols, r0, r1, block_rows
                                 terms, base)
         if own < b1:
             _copy_terms(edge_after, 0, terms, pad + (own - b0) * cols, cols)
+        _flag_rows(terms, pad, cols, b0, b1, now_over)
         _gather(movable, terms, pad, cols, b0 * cols, b1 * cols, corr)
         if applied or count > 0:
             _apply(q, qd, dv, corr, done * cols, b1 * cols, h)
@@ -280,7 +335,10 @@ def strain_limit(q, qd, dv, rest, hold_kind, inherited_fixed, max_stretch, max_i
     terms = np.empty((chunks, TERMS, cols + 1 + block_rows * cols))
     edges = np.zeros((chunks + 1, TERMS, cols))  # forward terms of the row before chunk ch
     counts = np.zeros(chunks, dtype=np.int64)
+    # rows flagged by the last sweep and by this one, alternating (the first visits all)
+    row_flags = np.ones((2, rows), dtype=np.bool_)
     for sweep in range(max_iterations):
+        was_over, now_over = row_flags[sweep % 2], row_flags[(sweep + 1) % 2]
         at_edges = 0
         for ch in range(1, chunks):
             r = ch * rows // chunks - 1
@@ -290,7 +348,8 @@ def strain_limit(q, qd, dv, rest, hold_kind, inherited_fixed, max_stretch, max_i
             counts[ch] = _chunk_sweep(qf, qdf, dvf, cf, movable, masks, rows, cols,
                                       ch * rows // chunks, (ch + 1) * rows // chunks,
                                       block_rows, limit, threshold, h, edges[ch],
-                                      edges[ch + 1], terms[ch], at_edges > 0)
+                                      edges[ch + 1], terms[ch], at_edges > 0, was_over,
+                                      now_over)
         total = at_edges
         for ch in range(chunks):
             total += counts[ch]
