@@ -135,9 +135,16 @@ def test_gripper_grasps_carries_rigidly_and_releases(graph):
     assert spin_until(lambda: not sim.grippers['left'].grasping)
     z0 = sim.state.points_by_id(sim.model, 3)[80, 2]
     clouds.clear()
-    spin_until(lambda: len(clouds) >= 60)
-    # measured 1.34 m after 60 ticks (1 s); free fall would be 4.9 m
-    assert sim.state.points_by_id(sim.model, 3)[80, 2] < z0 - 0.5
+    heights = []
+
+    def swung():
+        heights.append(sim.state.points_by_id(sim.model, 3)[80, 2])
+        return len(clouds) >= 60
+    spin_until(swung)
+    # the cloth hangs from its two pins: the corner swings down and, with the multigrid
+    # solver's low damping, back up; its lowest point over the second is asserted, not
+    # where the swing happens to be after 60 ticks (a slow run caught it on the way up)
+    assert min(heights) < z0 - 0.5
 
 
 def test_bad_gripper_commands_are_dropped_and_node_lives(graph):
