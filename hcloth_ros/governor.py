@@ -37,6 +37,12 @@ class Governor:
         """Do not judge the next ticks (the simulated levels just changed)."""
         self._grace = self.grace_ticks
 
+    def reset(self):
+        """Start afresh: every level, no overruns or headroom counted, a grace period."""
+        self.cap = self.top_level
+        self._overruns = self._headroom = 0
+        self.restart_grace()
+
     def judge(self, tick_seconds):
         """Account one tick; returns ``'drop'`` or ``'restore'`` if the cap changed."""
         if self._grace > 0:

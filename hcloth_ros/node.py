@@ -179,9 +179,7 @@ class ClothSimNode(Node):
                 self.lod_level = self.governor.floor = p.value
             elif p.name == 'governor':
                 self._governing = p.value
-                if not p.value:         # every level again, judged afresh if turned back on
-                    self.governor.cap = self.top_level
-                    self.governor.restart_grace()
+                self.governor.reset()   # every level again, judged afresh when back on
             elif p.name == 'solver.dt':
                 self.dt = float(p.value)
             elif p.name == 'solver.substeps':

@@ -344,6 +344,76 @@ def test_strain_limit_local_stretch(centre, inherited_fixed, kit):
     assert np.array_equal(got[0][:, far], q[:, far])    # rows far from the pull stay
 
 
+def _unskipped_strain_limit():
+    """Both builds of strain limiting with the skipping of unchanged blocks switched off."""
+    import types
+    import numba
+    from hcloth_ros.core.kernels import jit, strain
+
+    def always(row_flags, lo, hi):
+        return True
+    flagged = numba.njit(always)
+    builds = []
+    for split, options in ((False, dict(jit.JIT, cache=False)),
+                           (True, dict(jit.PJIT, cache=False))):
+        sweep_py = strain._chunk_sweep.py_func
+        sweep = numba.njit(**dict(jit.JIT, cache=False))(types.FunctionType(
+            sweep_py.__code__, dict(sweep_py.__globals__, _any_flagged=flagged), 'sweep'))
+        limit_py = strain.strain_limit.py_func
+        builds.append(numba.njit(**options)(types.FunctionType(
+            limit_py.__code__, dict(limit_py.__globals__, _chunk_sweep=sweep,
+                                    SPLIT_ROWS=split), 'unskipped')))
+    return builds
+
+
+def _bits(a):
+    """Array bytes with -0.0 as 0.0 and one NaN pattern (a skipped block adds no +0.0)."""
+    a = a + 0.0
+    a[np.isnan(a)] = np.nan
+    return a.tobytes()
+
+
+def test_strain_limit_skipping_changes_no_bit():
+    """
+    Skipping blocks gives the same bits as sweeping every block, near every boundary.
+
+    One point pulled (0.15 and 1 spacing) on every row within three of a block boundary
+    (22 rows on 91 columns) or of a parallel chunk boundary (rows 32 and 64), a row
+    stretched a little elsewhere, both builds, with and without inherited points fixed.
+    A window one row narrower on either side fails it (pulls of 1 spacing at rows 20 and
+    23, found by the review's wider search).
+    """
+    serial_full, parallel_full = _unskipped_strain_limit()
+    lv = make_level(97, 91, seed=11, noise=0.0)
+    kind = np.zeros_like(lv['kind'])
+    du = 1.0 / 90
+    boundaries = {0, 22, 44, 66, 88, 32, 64, 96}
+    rows = sorted({r for b in boundaries for r in range(b - 3, b + 3) if 0 <= r < 97})
+    compared = 0
+    for r in rows:
+        for amplitude in (0.15, 1.0):
+            for inherited_fixed in (False, True):
+                q = lv['q'].copy()
+                q[2, r, (5 * r) % 88] += amplitude * du
+                # and a whole row stretched a little (under the tolerance) half a grid away
+                q[0, (r + 48) % 97, 3:] += 0.12 * du
+                for fast, full in ((kernels.SERIAL.strain_limit, serial_full),
+                                   (kernels.PARALLEL.strain_limit, parallel_full)):
+                    runs = []
+                    for kernel in (fast, full):
+                        a = q.copy(), lv['qd'].copy(), np.zeros_like(q)
+                        sweeps = kernel(*a, lv['rest'], kind, inherited_fixed, 0.1, 25, 1e-4,
+                                        H, full_nan(q.shape))
+                        runs.append((sweeps,) + tuple(_bits(x) for x in a))
+                    assert runs[0] == runs[1], (r, amplitude, inherited_fixed)
+                    compared += 1
+    assert compared == len(rows) * 8
+
+
+def full_nan(shape):
+    return np.full(shape, np.nan)
+
+
 @BUILDS
 @pytest.mark.parametrize('rows,cols', SHAPES)
 def test_strain_limit_nan(rows, cols, kit):

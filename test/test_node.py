@@ -140,7 +140,7 @@ def test_gripper_grasps_carries_rigidly_and_releases(graph):
     def swung():
         heights.append(sim.state.points_by_id(sim.model, 3)[80, 2])
         return len(clouds) >= 60
-    spin_until(swung)
+    assert spin_until(swung)
     # the cloth hangs from its two pins: the corner swings down and, with the multigrid
     # solver's low damping, back up; its lowest point over the second is asserted, not
     # where the swing happens to be after 60 ticks (a slow run caught it on the way up)

@@ -61,6 +61,16 @@ def test_governor_does_not_judge_during_its_grace_ticks():
     assert all(g.judge(10 * PERIOD) is None for _ in range(5 + 2)) and g.cap == 3
 
 
+def test_governor_reset_forgets_what_it_counted():
+    g = governor()
+    assert [g.judge(2 * PERIOD) for _ in range(3)] == [None, None, 'drop']
+    assert [g.judge(2 * PERIOD) for _ in range(2)] == [None, None]
+    g.reset()
+    assert g.cap == 4
+    # two overruns were counted before: after the reset a third in a row is needed again
+    assert [g.judge(2 * PERIOD) for _ in range(3)] == [None, None, 'drop']
+
+
 @pytest.mark.parametrize('consumed_all,lod,cap,expected', [
     (True, 1, 4, 4), (False, 1, 4, 1), (True, 1, 2, 2), (True, 3, 2, 3), (False, 0, 4, 0)])
 def test_finest_to_simulate(consumed_all, lod, cap, expected):

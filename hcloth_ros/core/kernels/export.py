@@ -2,8 +2,9 @@
 What leaves the engine for messages: a level's positions as float32, in point-id order.
 
 A ``PointCloud2`` carries float32 ``x y z`` per point id; the state holds float64 planes in
-grid order. Gathering and narrowing in one pass costs 0.23 ms at 257 x 257 where numpy's
-transpose, fancy index and cast took 3 ms (the id order scatters over the grid).
+grid order. Gathering and narrowing in one pass replaces numpy's transpose, fancy index
+and cast, three passes over a scattered order (the node benchmark's ``pack`` at 257 x 257
+went from 2.1 ms to 0.8-1.7 ms p50).
 """
 
 from hcloth_ros.core.kernels.jit import JIT
