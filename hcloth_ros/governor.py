@@ -15,10 +15,11 @@ class Governor:
     restores one. The next level has about 4x the points, but packing and publishing do
     not grow with the simulated levels: 2.5x is what a tick grew by here. Ticks right
     after start-up or a level change (first messages, restarted levels) are not judged.
+    Switched off (``enabled`` False) it judges nothing and the cap stays at the top level.
     """
 
     def __init__(self, period, top_level, floor=0, overrun_ticks=3, headroom_ticks=60,
-                 growth=2.5, fill=0.8, grace_ticks=30):
+                 growth=2.5, fill=0.8, grace_ticks=30, enabled=True):
         if not period > 0:
             raise ValueError(f'period must be positive, got {period}')
         self.period = float(period)
@@ -32,19 +33,28 @@ class Governor:
         self.grace_ticks = int(grace_ticks)
         self._overruns = self._headroom = 0
         self._grace = self.grace_ticks
+        self.enabled = bool(enabled)
 
     def restart_grace(self):
         """Do not judge the next ticks (the simulated levels just changed)."""
         self._grace = self.grace_ticks
 
-    def reset(self):
-        """Start afresh: every level, no overruns or headroom counted, a grace period."""
+    def set_enabled(self, enabled):
+        """
+        Switch judging on or off; either way start afresh.
+
+        Every level, no overruns or headroom counted, a grace period: overruns counted
+        before a switch-off must not shed a level at the first overrun after it.
+        """
+        self.enabled = bool(enabled)
         self.cap = self.top_level
         self._overruns = self._headroom = 0
         self.restart_grace()
 
     def judge(self, tick_seconds):
         """Account one tick; returns ``'drop'`` or ``'restore'`` if the cap changed."""
+        if not self.enabled:
+            return None
         if self._grace > 0:
             self._grace -= 1
             return None

@@ -92,8 +92,8 @@ class ClothSimNode(Node):
         self.recorder = self._make_recorder()
         self.stats = TickStats()
         self.period = 1.0 / self.get_parameter('rate_hz').value
-        self.governor = Governor(self.period, self.top_level, floor=self.lod_level)
-        self._governing = self.get_parameter('governor').value
+        self.governor = Governor(self.period, self.top_level, floor=self.lod_level,
+                                 enabled=self.get_parameter('governor').value)
         self.add_post_set_parameters_callback(self._apply_parameters)
         self.timer = self.create_timer(self.period, self._tick)
         lv = self.model.level(self.top_level)
@@ -178,8 +178,7 @@ class ClothSimNode(Node):
             elif p.name == 'lod_level':
                 self.lod_level = self.governor.floor = p.value
             elif p.name == 'governor':
-                self._governing = p.value
-                self.governor.reset()   # every level again, judged afresh when back on
+                self.governor.set_enabled(p.value)
             elif p.name == 'solver.dt':
                 self.dt = float(p.value)
             elif p.name == 'solver.substeps':
@@ -264,8 +263,6 @@ class ClothSimNode(Node):
         self._govern(t4 - t0)
 
     def _govern(self, tick_seconds):
-        if not self._governing:
-            return
         change = self.governor.judge(tick_seconds)
         if change == 'drop':
             self.get_logger().warning(

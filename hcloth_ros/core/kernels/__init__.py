@@ -92,9 +92,8 @@ with keyed_cache():
     from hcloth_ros.core.kernels.strain import (excess_threshold, strain_limit,
                                                 strain_limit_parallel)
 
-KERNELS = ('add_prolonged_drift', 'anchor', 'assemble_hierarchy', 'contact',
-           'conjugate_gradient', 'energy',
-           'eq6_first_sweep', 'eq6_second_sweep', 'eq7_level', 'excess_threshold',
+KERNELS = ('add_prolonged_drift', 'anchor', 'assemble_hierarchy', 'contact', 'conjugate_gradient',
+           'energy', 'eq6_first_sweep', 'eq6_second_sweep', 'eq7_level', 'excess_threshold',
            'explicit_step', 'inject', 'multigrid_cg', 'new_positions', 'newton_residual',
            'points_by_id_f32', 'prescribe', 'prolong', 'spring_forces', 'start_velocity',
            'strain_limit', 'strain_stats', 'system_apply', 'system_diagonal')
@@ -116,12 +115,11 @@ def builds(rows, cols, threads):
 
 
 __all__ = ['add_prolonged_drift', 'anchor', 'assemble_hierarchy', 'builds', 'chunk_count',
-           'conjugate_gradient',
-           'conjugate_gradient_parallel', 'contact', 'DRIVEN', 'energy', 'eq6_first_sweep',
-           'eq6_second_sweep', 'eq7_level', 'eq7_level_parallel', 'excess_threshold',
-           'explicit_step', 'FREE', 'inject', 'KERNELS', 'multigrid_cg', 'new_positions',
-           'newton_residual', 'PAR_MIN_POINTS', 'PARALLEL', 'PINNED', 'points_by_id_f32',
-           'prescribe', 'prolong', 'SERIAL', 'spring_forces', 'start_velocity', 'STENCIL_DC',
-           'STENCIL_DR', 'STENCIL_SIZE',
-           'strain_limit', 'strain_limit_parallel', 'strain_stats', 'strain_stats_parallel',
-           'system_apply', 'system_apply_parallel', 'system_diagonal']
+           'conjugate_gradient', 'conjugate_gradient_parallel', 'contact', 'DRIVEN', 'energy',
+           'eq6_first_sweep', 'eq6_second_sweep', 'eq7_level', 'eq7_level_parallel',
+           'excess_threshold', 'explicit_step', 'FREE', 'inject', 'KERNELS', 'multigrid_cg',
+           'new_positions', 'newton_residual', 'PAR_MIN_POINTS', 'PARALLEL', 'PINNED',
+           'points_by_id_f32', 'prescribe', 'prolong', 'SERIAL', 'spring_forces', 'start_velocity',
+           'STENCIL_DC', 'STENCIL_DR', 'STENCIL_SIZE', 'strain_limit', 'strain_limit_parallel',
+           'strain_stats', 'strain_stats_parallel', 'system_apply', 'system_apply_parallel',
+           'system_diagonal']
