@@ -34,6 +34,7 @@ setup(
             'hcloth_node_bench = hcloth_ros.bench.node:main',
             'hcloth_engine_bench = hcloth_ros.bench.engine:main',
             'hcloth_bench = hcloth_ros.bench.__main__:main',
+            'hcloth_contact_bench = hcloth_ros.bench.self_contact:main',
         ],
     },
 )

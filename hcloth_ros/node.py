@@ -110,7 +110,7 @@ class ClothSimNode(Node):
         recording = bool(self.get_parameter('rerun_path').value
                          or self.get_parameter('rerun_url').value)
         wanted = {'solvers': [self.solver.name], 'parallel': threads > 1,
-                  'energy': recording}
+                  'energy': recording, 'self_contact': self.solver.self_contact is not None}
         if not kernels_cached(**wanted):
             self.get_logger().info(
                 f'preparing the numba kernels of the {self.solver.name} solver: the first '

@@ -70,6 +70,14 @@ PARAMS = [
           False),
     Param('solver.dt', 1 / 60, 'simulated seconds per step (s)', 1e-6, 0.1, False),
     Param('solver.substeps', 1, 'solver steps per timer tick', 1, 100, False),
+    Param('self_contact.thickness', 0.0, 'self-contact: finest points stay this far from '
+          "the cloth's own triangles and never cross one (m); 0 switches it off", 0.0, 0.1),
+    Param('self_contact.friction', 0.3, 'self-contact: friction coefficient between layers',
+          0.0, 10.0),
+    Param('self_contact.iterations', 8, 'self-contact: most rounds of detection and '
+          'response a check', 1, 100),
+    Param('self_contact.interval', 1, 'self-contact: check every n-th step (cheaper, but '
+          'layers may pass through each other in between)', 1, 1000),
     Param('pinned_points', [0, 8], 'finest-level point ids that hold still (see README '
           'for the numbering); [-1] = none', -1, 2 ** 31 - 1, False),
 ]
@@ -173,6 +181,12 @@ def build_solver(model, values):
                    'integrator': values['solver.integrator'],
                    'newton_iterations': int(values['solver.newton_iterations']),
                    'cg_iterations': int(values['solver.cg_iterations'])}
+    thickness = float(values['self_contact.thickness'])
+    if thickness > 0.0:
+        options.update(thickness=thickness,
+                       self_friction=float(values['self_contact.friction']),
+                       self_contact_iterations=int(values['self_contact.iterations']),
+                       self_contact_interval=int(values['self_contact.interval']))
     return make_solver(name, model, external=values['solver.external'], strain_limit=limit,
                        **options)
 

@@ -60,3 +60,14 @@ def test_readme_documents_every_parameter():
     readme = open(os.path.join(os.path.dirname(CONFIG), 'README.md')).read()
     missing = [p.name for p in params.PARAMS + NODE_PARAMS if f'| `{p.name}` |' not in readme]
     assert missing == []
+
+
+def test_self_contact_parameters_reach_the_solver():
+    values = params.resolve({'cloth.resolution': [5, 5], 'cloth.levels': 2})
+    assert params.build_solver(params.build_model(values), values).self_contact is None
+    values = params.resolve({'cloth.resolution': [5, 5], 'cloth.levels': 2,
+                             'self_contact.thickness': 0.004, 'self_contact.friction': 0.2,
+                             'self_contact.iterations': 3, 'self_contact.interval': 2})
+    contact = params.build_solver(params.build_model(values), values).self_contact
+    assert (contact.thickness, contact.friction, contact.iterations, contact.interval) == \
+        (0.004, 0.2, 3, 2)

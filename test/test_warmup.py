@@ -19,7 +19,11 @@ def test_shares_compile_exactly_the_signatures_the_warm_up_uses():
     """
     calls = kernel_calls(parallel=numba.get_num_threads() > 1, energy=True)
     names = {d.py_func.__name__ for d, _ in calls}
-    assert {'eq7_level', 'strain_limit', 'contact', 'conjugate_gradient', 'energy'} <= names
+    assert {'eq7_level', 'strain_limit', 'contact', 'conjugate_gradient', 'energy',
+            'self_contact'} <= names
+    without = {d.py_func.__name__ for d, _ in kernel_calls(
+        parallel=numba.get_num_threads() > 1, energy=True, self_contact=False)}
+    assert 'self_contact' not in without
     for dispatcher, signature in calls:
         assert signature in dispatcher.overloads, (dispatcher.py_func.__name__, signature)
 

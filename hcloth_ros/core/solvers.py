@@ -30,6 +30,7 @@ import time
 
 from hcloth_ros.core import kernels
 from hcloth_ros.core.control import FREE
+from hcloth_ros.core.self_contact import SelfContact
 import numba
 import numpy as np
 
@@ -79,13 +80,20 @@ class Solver:
     :param builds: ``'serial'`` or ``'parallel'`` kernel builds on every level (or a kernel
         set with their names), or None: the parallel builds on levels large enough to
         split when numba runs several threads (see :mod:`hcloth_ros.core.kernels`).
+    :param thickness: self-contact: the finest simulated level keeps its points this far
+        (m) from its own triangles and no point crosses one during a step
+        (:class:`~hcloth_ros.core.self_contact.SelfContact`); None switches it off.
+    :param self_friction: friction coefficient between layers of the cloth.
+    :param self_contact_iterations: most rounds of detection and response a check.
+    :param self_contact_interval: check every n-th step.
     """
 
     name = ''
 
     def __init__(self, model, external='exact', strain_limit=0.1, strain_iterations=100,
                  strain_refine_iterations=4, strain_tolerance=0.005, blowup_strain=10.0,
-                 builds=None):
+                 builds=None, thickness=None, self_friction=0.3, self_contact_iterations=8,
+                 self_contact_interval=1):
         if external not in EXTERNAL_MODES:
             raise ValueError(f'external must be one of {EXTERNAL_MODES}, got {external!r}')
         if strain_limit is not None and not (0.0 < strain_limit < 10.0):
@@ -98,6 +106,8 @@ class Solver:
             raise ValueError(f'strain_tolerance must be in (0, 1), got {strain_tolerance}')
         if not (blowup_strain > 0):
             raise ValueError(f'blowup_strain must be positive, got {blowup_strain}')
+        self.self_contact = None if thickness is None else SelfContact(
+            thickness, self_friction, self_contact_iterations, self_contact_interval)
         if isinstance(builds, str) and builds not in ('serial', 'parallel'):
             raise ValueError(f"builds must be 'serial', 'parallel' or None, got {builds!r}")
         self._builds = {'serial': kernels.SERIAL, 'parallel': kernels.PARALLEL}.get(
@@ -200,6 +210,11 @@ class Solver:
             holds = control.holds(k)
             self._prescribe(k, state, holds, h)
             self._integrate(k, state, holds, h)
+        checked = None
+        if self.self_contact is not None:
+            checked = self.self_contact.apply(self, levels, state, control.holds(levels[-1]), h)
+            if checked is not None:
+                self._extra['self_contact_pairs'] = checked
         report = self._check(levels)
         if report.ok:
             # the new state goes in by swapping arrays (no copy): State.q[k] and
@@ -208,6 +223,8 @@ class Solver:
                 state.q[k], self._q[k] = self._q[k], state.q[k]
                 state.qd[k], self._qd[k] = self._qd[k], state.qd[k]
             state.time += h
+            if self.self_contact is not None:
+                self.self_contact.committed(levels[-1], state, checked is not None)
         report.seconds = time.perf_counter() - start
         report.extra.update(self._extra)
         return report

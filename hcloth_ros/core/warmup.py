@@ -25,8 +25,8 @@ import numpy as np
 
 
 # Seconds a kernel took to compile from an empty cache here (2 cores, numba 0.68; the
-# multigrid ones with the other core busy): only to balance the shares of the processes;
-# unknown kernels count 1.
+# multigrid ones and self_contact with the other core busy): only to balance the shares of
+# the processes; unknown kernels count 1.
 COMPILE_SECONDS = {'strain_limit': 7.3, 'strain_limit_parallel': 6.0, 'eq7_level': 2.2,
                    'eq7_level_parallel': 3.0, 'strain_stats': 1.9,
                    'strain_stats_parallel': 2.5, 'eq6_first_sweep': 2.1,
@@ -36,7 +36,7 @@ COMPILE_SECONDS = {'strain_limit': 7.3, 'strain_limit_parallel': 6.0, 'eq7_level
                    'energy': 1.0, 'multigrid_cg': 13.3, 'assemble_hierarchy': 8.1,
                    'newton_residual': 1.8, 'anchor': 1.8, 'new_positions': 0.4,
                    'start_velocity': 0.3, 'prescribe': 0.3, 'prolong': 0.5, 'inject': 0.1,
-                   'points_by_id_f32': 0.3}
+                   'points_by_id_f32': 0.3, 'self_contact': 18.8}
 
 
 # Options a solver runs with to reach all its kernels: the multigrid solver refines by
@@ -50,17 +50,20 @@ def _tiny_model():
     return ClothBuilder(resolution=(3, 3), level_count=2, scene=scene).finalize()
 
 
-def _exercise(model, solvers, parallel, energy, builds=None):
+def _exercise(model, solvers, parallel, energy, self_contact=False, builds=None):
     """
     Make every kernel call the configuration makes.
 
-    One step of each solver (and build), the energy, a level restart. ``builds`` maps
+    One step of each solver (and build), with self-contact if asked, the energy, a level
+    restart. ``builds`` maps
     ``'serial'`` and ``'parallel'`` to the kernel sets (default :mod:`kernels`' own).
     """
     builds = builds or {'serial': kernels.SERIAL, 'parallel': kernels.PARALLEL}
     for name in SOLVERS if solvers is None else solvers:
         for build in ('serial', 'parallel') if parallel else ('serial',):
             for options in EXERCISE_OPTIONS.get(name, ({},)):
+                if self_contact:
+                    options = dict(options, thickness=0.01)
                 state = State.at_rest(model)
                 control = Control(model)
                 control.pin([0])
@@ -86,7 +89,8 @@ class _Recorder:
     """
 
     RESULTS = {'strain_limit': 0, 'strain_stats': (0.0, 0.0, True),
-               'conjugate_gradient': (1, 0.0), 'multigrid_cg': (1, 0.0), 'energy': (0.0, 0.0, 0.0)}
+               'conjugate_gradient': (1, 0.0), 'multigrid_cg': (1, 0.0), 'energy': (0.0, 0.0, 0.0),
+               'self_contact': (0, 0, 0)}
 
     def __init__(self, kit, calls):
         self._kit, self._calls = kit, calls
@@ -100,13 +104,13 @@ class _Recorder:
         return record
 
 
-def kernel_calls(solvers=None, parallel=None, energy=True):
+def kernel_calls(solvers=None, parallel=None, energy=True, self_contact=True):
     """``[(dispatcher, signature)]`` a warm-up of this configuration compiles, each once."""
     parallel = numba.get_num_threads() > 1 if parallel is None else parallel
     calls = []
     sets = {'serial': _Recorder(kernels.SERIAL, calls),
             'parallel': _Recorder(kernels.PARALLEL, calls)}
-    _exercise(_tiny_model(), solvers, parallel, energy, builds=sets)
+    _exercise(_tiny_model(), solvers, parallel, energy, self_contact, builds=sets)
     unique = {}
     for dispatcher, args in calls:
         signature = tuple(numba.typeof(a) for a in args)
@@ -114,13 +118,13 @@ def kernel_calls(solvers=None, parallel=None, energy=True):
     return list(unique.values())
 
 
-def compile_share(solvers, parallel, energy, index, count):
+def compile_share(solvers, parallel, energy, self_contact, index, count):
     """
     Compile share ``index`` of ``count`` of the configuration's kernels into the cache.
 
     Shares are balanced by :data:`COMPILE_SECONDS`, largest first.
     """
-    calls = sorted(kernel_calls(solvers, parallel, energy),
+    calls = sorted(kernel_calls(solvers, parallel, energy, self_contact),
                    key=lambda c: -COMPILE_SECONDS.get(c[0].py_func.__name__, 1.0))
     load = [0.0] * count
     for dispatcher, signature in calls:
@@ -130,29 +134,30 @@ def compile_share(solvers, parallel, energy, index, count):
             dispatcher.compile(signature)
 
 
-def _stamp(solvers, parallel, energy):
+def _stamp(solvers, parallel, energy, self_contact):
     """Return the file that says a configuration's kernels are in the cache (or None)."""
     if kernels.jit.CACHE_DIR is None:
         return None
     import llvmlite.binding
     names = sorted(SOLVERS if solvers is None else solvers)
-    key = '-'.join(names + ['parallel' if parallel else 'serial'] + (['energy'] if energy else [])
+    key = '-'.join(names + ['parallel' if parallel else 'serial']
+                   + (['energy'] if energy else []) + (['contact'] if self_contact else [])
                    + [numba.__version__, llvmlite.binding.get_host_cpu_name()])
     return os.path.join(kernels.jit.CACHE_DIR, f'warm-{key}')
 
 
-def kernels_cached(solvers=None, parallel=None, energy=True):
+def kernels_cached(solvers=None, parallel=None, energy=True, self_contact=True):
     """
     Tell whether :func:`warm_up` with these arguments ran on this machine before.
 
     If so it will load, not compile: under a second instead of tens of seconds.
     """
     parallel = numba.get_num_threads() > 1 if parallel is None else parallel
-    stamp = _stamp(solvers, parallel, energy)
+    stamp = _stamp(solvers, parallel, energy, self_contact)
     return stamp is not None and os.path.exists(stamp)
 
 
-def _compile_in_processes(solvers, parallel, energy, processes):
+def _compile_in_processes(solvers, parallel, energy, self_contact, processes):
     """Shares 1 .. processes-1 in child processes, share 0 here, all into the cache."""
     code = ('import sys; from hcloth_ros.core.warmup import compile_share; '
             'compile_share(*eval(sys.argv[1]))')
@@ -160,34 +165,36 @@ def _compile_in_processes(solvers, parallel, energy, processes):
     env = dict(os.environ, PYTHONPATH=os.pathsep.join(
         [package_root] + [p for p in os.environ.get('PYTHONPATH', '').split(os.pathsep) if p]))
     children = [subprocess.Popen([sys.executable, '-c', code,
-                                  repr((solvers, parallel, energy, i, processes))], env=env)
+                                  repr((solvers, parallel, energy, self_contact, i,
+                                        processes))], env=env)
                 for i in range(1, processes)]
     try:
-        compile_share(solvers, parallel, energy, 0, processes)
+        compile_share(solvers, parallel, energy, self_contact, 0, processes)
     finally:
         for child in children:
             child.wait()
 
 
-def warm_up(solvers=None, parallel=None, energy=True, processes=None):
+def warm_up(solvers=None, parallel=None, energy=True, self_contact=True, processes=None):
     """
     Compile (or load from the cache) the kernels a configuration uses; returns seconds.
 
     ``solvers``: names (default: all of :data:`SOLVERS`; the gravity mode is a flag of the
     kernels, so either mode compiles both); ``parallel``: also the parallel builds
     (default: when numba runs more than one thread); ``energy``: the energy kernel
-    (recordings and metrics); ``processes``: how many processes compile on an empty cache
-    (default: the cores, at most 4; 1 compiles here only). With the on-disk cache this
+    (recordings and metrics); ``self_contact``: the self-contact kernel; ``processes``:
+    how many processes compile on an empty cache (default: the cores, at most 4; 1
+    compiles here only). With the on-disk cache this
     loads machine code in well under a second.
     """
     start = time.perf_counter()
     parallel = numba.get_num_threads() > 1 if parallel is None else parallel
     processes = min(os.cpu_count() or 1, 4) if processes is None else int(processes)
     if processes > 1 and kernels.jit.CACHE_DIR is not None \
-            and not kernels_cached(solvers, parallel, energy):
-        _compile_in_processes(solvers, parallel, energy, processes)
-    _exercise(_tiny_model(), solvers, parallel, energy)
-    stamp = _stamp(solvers, parallel, energy)
+            and not kernels_cached(solvers, parallel, energy, self_contact):
+        _compile_in_processes(solvers, parallel, energy, self_contact, processes)
+    _exercise(_tiny_model(), solvers, parallel, energy, self_contact)
+    stamp = _stamp(solvers, parallel, energy, self_contact)
     if stamp is not None:
         with open(stamp, 'w'):
             pass

@@ -47,6 +47,9 @@ strain limiting (Provot 1995)
     ``strain.strain_limit``; ``ref_strain_limit``; ``test_kernel_equivalence::test_strain_*``
 contact with static obstacles
     ``contact.contact``; closed-form geometry; ``test_physics::test_cloth_dropped_on_*``
+self-contact (thickness, crossings during a step, friction between layers)
+    ``self_contact.self_contact``; a brute-force check over every point and triangle;
+    ``test_self_contact``
 strain and finiteness (the blow-up check), energy
     ``stats.strain_stats``, ``stats.energy``; inline; ``test_kernel_equivalence::
     test_strain_stats``, the energy checks of ``test_physics`` and ``test_implicit``
@@ -88,6 +91,7 @@ with keyed_cache():
                                                 PINNED, STENCIL_DC, STENCIL_DR,
                                                 STENCIL_SIZE)
     from hcloth_ros.core.kernels.multigrid import assemble_hierarchy, inject, multigrid_cg
+    from hcloth_ros.core.kernels.self_contact import self_contact
     from hcloth_ros.core.kernels.stats import energy, strain_stats, strain_stats_parallel
     from hcloth_ros.core.kernels.strain import (excess_threshold, strain_limit,
                                                 strain_limit_parallel)
@@ -95,8 +99,9 @@ with keyed_cache():
 KERNELS = ('add_prolonged_drift', 'anchor', 'assemble_hierarchy', 'contact', 'conjugate_gradient',
            'energy', 'eq6_first_sweep', 'eq6_second_sweep', 'eq7_level', 'excess_threshold',
            'explicit_step', 'inject', 'multigrid_cg', 'new_positions', 'newton_residual',
-           'points_by_id_f32', 'prescribe', 'prolong', 'spring_forces', 'start_velocity',
-           'strain_limit', 'strain_stats', 'system_apply', 'system_diagonal')
+           'points_by_id_f32', 'prescribe', 'prolong', 'self_contact', 'spring_forces',
+           'start_velocity', 'strain_limit', 'strain_stats', 'system_apply',
+           'system_diagonal')
 # Every kernel by name: SERIAL holds the serial builds, PARALLEL the parallel builds of
 # those that have one (jit.serial_and_parallel) and the serial build of the others.
 SERIAL = SimpleNamespace(**{name: globals()[name] for name in KERNELS})
@@ -119,7 +124,7 @@ __all__ = ['add_prolonged_drift', 'anchor', 'assemble_hierarchy', 'builds', 'chu
            'eq6_first_sweep', 'eq6_second_sweep', 'eq7_level', 'eq7_level_parallel',
            'excess_threshold', 'explicit_step', 'FREE', 'inject', 'KERNELS', 'multigrid_cg',
            'new_positions', 'newton_residual', 'PAR_MIN_POINTS', 'PARALLEL', 'PINNED',
-           'points_by_id_f32', 'prescribe', 'prolong', 'SERIAL', 'spring_forces', 'start_velocity',
-           'STENCIL_DC', 'STENCIL_DR', 'STENCIL_SIZE', 'strain_limit', 'strain_limit_parallel',
-           'strain_stats', 'strain_stats_parallel', 'system_apply', 'system_apply_parallel',
-           'system_diagonal']
+           'points_by_id_f32', 'prescribe', 'prolong', 'SERIAL', 'self_contact', 'spring_forces',
+           'start_velocity', 'STENCIL_DC', 'STENCIL_DR', 'STENCIL_SIZE', 'strain_limit',
+           'strain_limit_parallel', 'strain_stats', 'strain_stats_parallel', 'system_apply',
+           'system_apply_parallel', 'system_diagonal']

@@ -1,0 +1,158 @@
+"""
+What self-contact costs a step, with nothing near and with the cloth lying on itself.
+
+    hcloth_contact_bench [--sizes 129,257] [--steps 60] [--thickness 0.004]
+                         [--intervals 1,4] [--json FILE]
+
+For each finest size the ``multigrid`` solver (default options, level 0 9 x 9) runs two
+scenes, with self-contact off and on every n-th step for each ``--intervals`` n:
+
+* ``swing``: the benchmark's cloth pinned at two corners swings from horizontal: nothing
+  of it comes near itself, the cost of checking;
+* ``folded``: the cloth folded in two (2 cm between the layers) falls 10 cm onto the
+  ground, the top layer onto the bottom one: the cost of contact over the whole sheet.
+
+Prints, per scene and setting, the median and p90 over the steps of the self-contact
+kernel's time in a step (its calls summed, 0 on steps without a check), the whole step's
+median, the most pairs one check found and the largest finest strain of the run, with
+the thread count and the load average. The kernel is serial: one thread whatever
+``NUMBA_NUM_THREADS`` says; the rest of the step follows it.
+"""
+
+import argparse
+import json
+import os
+import time
+
+from hcloth_ros.bench.scenarios import build_model, prepare
+from hcloth_ros.core import Control, make_scene, make_solver, State
+import numba
+import numpy as np
+
+GAP = 0.02
+
+
+def folded(q, height, gap=GAP):
+    """
+    Fold a flat level ``(3, rows, cols)`` (lying along +y) in two at its middle, unstretched.
+
+    The bottom half lies at ``height``, the fold is a half circle of diameter ``gap``, the
+    top half lies ``gap`` above the bottom one, going back: every row keeps its distance
+    along the cloth.
+    """
+    radius = gap / 2
+    arc = np.pi * radius
+    v = q[1, :, 0] - q[1, 0, 0]
+    start = v[-1] / 2 - arc / 2            # where the fold begins along the cloth
+    out = q.copy()
+    for r, s in enumerate(v - start):
+        if s < 0.0:
+            y, z = v[r], 0.0
+        elif s <= arc:
+            y, z = start + radius * np.sin(s / radius), radius * (1.0 - np.cos(s / radius))
+        else:
+            y, z = start - (s - arc), gap
+        out[1, r] = q[1, 0, 0] + y
+        out[2, r] = height + z
+    return out
+
+
+def _timed_kernel(solver, level, times):
+    """Wrap the finest level's self-contact kernel to add its time to ``times[-1]``."""
+    kit = solver.kernels(level)
+    inner = kit.self_contact
+
+    class Timed:
+
+        def __getattr__(self, name):
+            return getattr(kit, name)
+
+        def self_contact(self, *args):
+            start = time.perf_counter()
+            result = inner(*args)
+            times[-1] += time.perf_counter() - start
+            return result
+
+    solver._kits[level] = Timed()
+
+
+def scene_setup(n, scene):
+    """Return ``(model, state, control)`` of a scene at finest side n."""
+    levels = int(round(np.log2((n - 1) / 8))) + 1
+    if scene == 'swing':
+        model = build_model(n, levels)
+        state = State.at_rest(model)
+        return model, state, prepare('swing', model, state).control
+    model = build_model(n, levels, scene=make_scene(ground_z=1.4))
+    state = State.at_rest(model)
+    for k in range(model.level_count):
+        state.q[k] = folded(state.q[k], 1.5)
+    return model, state, Control(model)
+
+
+def run(n, scene, steps, thickness, interval):
+    """Time ``steps`` steps of one scene (``interval`` None: self-contact off)."""
+    model, state, control = scene_setup(n, scene)
+    options = {} if interval is None else {'thickness': thickness,
+                                           'self_contact_interval': interval}
+    solver = make_solver('multigrid', model, **options)
+    finest = model.level_count - 1
+    solver.step(state, control, 1 / 60)        # compile or load, first allocations
+    kernel, totals, pairs, strain, refused = [], [], [0], 0.0, None
+    if interval is not None:
+        _timed_kernel(solver, finest, kernel)
+    for _ in range(steps):
+        kernel.append(0.0)
+        start = time.perf_counter()
+        report = solver.step(state, control, 1 / 60)
+        totals.append(time.perf_counter() - start)
+        if not report.ok:
+            refused = f'step {len(totals)} refused: {report.reason}'
+            break
+        pairs.append(report.extra.get('self_contact_pairs', 0))
+        strain = max(strain, report.max_strain)
+    ms = np.array(kernel) * 1e3
+    return {'n': n, 'scene': scene, 'interval': interval,
+            'kernel_median_ms': float(np.median(ms)),
+            'kernel_p90_ms': float(np.percentile(ms, 90)),
+            'step_median_ms': float(np.median(totals) * 1e3), 'pairs_max': int(max(pairs)),
+            'max_strain': float(strain), 'refused': refused}
+
+
+def _line(r):
+    setting = 'off' if r['interval'] is None else (
+        'every step' if r['interval'] == 1 else f"every {r['interval']}th")
+    kernel = '' if r['interval'] is None else (
+        f"kernel median {r['kernel_median_ms']:6.2f} ms, p90 {r['kernel_p90_ms']:6.2f} ms; ")
+    return (f"  {r['n']:4d} x {r['n']:<4d} {r['scene']:7s} {setting:11s} {kernel:40s}"
+            f"step median {r['step_median_ms']:6.2f} ms, most pairs {r['pairs_max']:5d}, "
+            f"max strain {r['max_strain']:.2f}" + (f"; {r['refused']}" if r['refused'] else ''))
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(description=__doc__.split('\n')[1])
+    parser.add_argument('--sizes', default='129,257', help='finest sides, comma-separated')
+    parser.add_argument('--steps', type=int, default=60)
+    parser.add_argument('--thickness', type=float, default=0.004)
+    parser.add_argument('--intervals', default='1,4',
+                        help='self_contact_interval values to run, comma-separated')
+    parser.add_argument('--json', help='also write the figures to this file')
+    args = parser.parse_args(argv)
+    print(f'self-contact cost: thickness {args.thickness * 1e3:g} mm, multigrid, '
+          f'{numba.get_num_threads()} numba thread(s), load average '
+          f'{os.getloadavg()[0]:.2f}', flush=True)
+    settings = [None] + [int(s) for s in args.intervals.split(',')]
+    results = []
+    for n in (int(s) for s in args.sizes.split(',')):
+        for scene in ('swing', 'folded'):
+            for interval in settings:
+                results.append(run(n, scene, args.steps, args.thickness, interval))
+                print(_line(results[-1]), flush=True)
+    print(f'load average after: {os.getloadavg()[0]:.2f}')
+    if args.json:
+        with open(args.json, 'w') as f:
+            json.dump(results, f, indent=1)
+
+
+if __name__ == '__main__':
+    main()

@@ -1,0 +1,737 @@
+"""
+Self-contact of one level: its points kept a thickness away from its own triangles.
+
+Triangles: grid cell (r, c) splits along its (r, c)-(r+1, c+1) diagonal (the one
+:func:`~hcloth_ros.core.kernels.eq7.prolong` uses for face centres) into triangle ``2 k``
+= (r, c), (r, c+1), (r+1, c+1) and ``2 k + 1`` = (r, c), (r+1, c+1), (r+1, c), with
+``k = r (cols - 1) + c``. A point is not tested against the triangles with a vertex
+within ``RING`` rows and columns of it: the cloth's own surface, held apart by its
+springs.
+
+Detection (from the start positions ``x0`` to the end positions ``x1``, each point
+moving linearly): the triangles are grouped in patches of ``PATCH`` x ``PATCH`` grid
+cells, each with the box its vertices sweep (grown by the thickness) and the cone of its
+normals. Patches whose boxes overlap are found by sweep and prune along x; a patch and
+its neighbours are skipped when their normals stay within a cone of about 80 degrees (a
+surface that cannot fold onto itself), so on a sheet with nothing near it nothing else
+runs. In the pairs of patches left, a point tests the blocks of ``SUB`` x ``SUB`` cells
+whose swept boxes its path comes near, then their triangles:
+
+* crossing: its distance to the triangle's plane changes sign in one of ``S``
+  sub-intervals (``S`` such that no point moves more than half the longest edge relative
+  to the level's mean motion in one, at most ``MAX_SUBSTEPS``) and, at the time that
+  distance interpolates to zero, it lies in the triangle or within the thickness of its
+  border; the pair keeps the side it came from;
+* near: at the end it is nearer than the thickness to the triangle's closest point
+  (inside, on an edge or at a vertex); the pair keeps the side of the plane it is on.
+
+Response (at the end positions; rounds of detection, each followed by ``RESOLVE_PASSES``
+Gauss-Seidel passes over its pairs, until a detection finds none, the last round moving
+points alone): the point and the triangle's vertices (weighted by the closest point's
+barycentric coordinates and inverse masses; held points do not move) move apart until
+they are ``(1 + SLACK)`` thicknesses apart. A crossed pair moves along the triangle's
+normal to the side the point came from; a near one along the normal if the closest point
+is inside the triangle, else along the line from the closest point on the border to the
+point (so a point sliding over another layer's free edge is not flipped between the two
+sides). Velocities lose their approach along that direction (inelastic: a push turned
+into velocity made the layers bounce and stretched the cloth); friction takes up to
+``friction`` times the push off the point's sliding relative to the triangle over the
+step, and that move divided by ``h`` off their velocities.
+"""
+
+import math
+
+from hcloth_ros.core.kernels.jit import JIT
+from hcloth_ros.core.kernels.layout import FREE
+import numba
+import numpy as np
+
+
+# Fewest and most sub-intervals of a step the crossing tests use (two: the distance to a
+# turning triangle's plane is far from linear over a whole step).
+MIN_SUBSTEPS = 2
+MAX_SUBSTEPS = 8
+# A point is not tested against triangles with a vertex within this many grid rows and
+# columns of it: its own surface, held apart by its springs (two rows and columns of
+# springs cannot fold within a thickness below the spacing without stretching 10 %).
+RING = 2
+# Grid cells a side of the patches detection culls by (64 cells, 128 triangles), and of
+# the blocks inside them a point tests (a divisor of PATCH).
+PATCH = 8
+SUB = 2
+# Patches whose triangles' normals all lie within this cosine of their mean normal (about
+# 80 degrees) cannot touch themselves or their neighbour patches (see _pair_needed).
+FLAT_COSINE = 0.17
+# Pairs are pushed this fraction beyond the thickness (see self_contact).
+SLACK = 0.05
+# Gauss-Seidel passes over the pairs of one detection.
+RESOLVE_PASSES = 4
+# Pairs a step may hold per point (beyond it the rest of the step's pairs are dropped and
+# the count says so).
+PAIRS_PER_POINT = 8
+
+
+@numba.njit(**JIT)
+def _triangle(t, cols):
+    """Flat indices of triangle t's three vertices on a grid of ``cols`` columns."""
+    k = t // 2
+    r, c = k // (cols - 1), k % (cols - 1)
+    a = r * cols + c
+    if t % 2 == 0:
+        return a, a + 1, a + cols + 1
+    return a, a + cols + 1, a + cols
+
+
+@numba.njit(**JIT)
+def _neighbours(p, t, cols):
+    """Whether a vertex of triangle t is within ``RING`` grid rows and columns of point p."""
+    k = t // 2
+    r, c = k // (cols - 1), k % (cols - 1)
+    pr, pc = p // cols, p % cols
+    return (r - RING <= pr <= r + 1 + RING) and (c - RING <= pc <= c + 1 + RING)
+
+
+@numba.njit(**JIT)
+def _at(x0, x1, i, tau, shift):
+    """Point i at time ``tau`` of the step in the frame of the mean displacement."""
+    return (x0[0, i] + tau * (x1[0, i] - x0[0, i] - shift[0]),
+            x0[1, i] + tau * (x1[1, i] - x0[1, i] - shift[1]),
+            x0[2, i] + tau * (x1[2, i] - x0[2, i] - shift[2]))
+
+
+@numba.njit(**JIT)
+def _plane(p, a, b, c):
+    """
+    Return p's signed distance to the plane of (a, b, c), its unit normal and weights.
+
+    The weights are the barycentric coordinates of p's projection (0, 0, 0 for a
+    degenerate triangle).
+    """
+    ex, ey, ez = b[0] - a[0], b[1] - a[1], b[2] - a[2]
+    fx, fy, fz = c[0] - a[0], c[1] - a[1], c[2] - a[2]
+    nx, ny, nz = ey * fz - ez * fy, ez * fx - ex * fz, ex * fy - ey * fx
+    area2 = math.sqrt(nx * nx + ny * ny + nz * nz)
+    if not area2 > 0.0:
+        return 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
+    nx, ny, nz = nx / area2, ny / area2, nz / area2
+    dx, dy, dz = p[0] - a[0], p[1] - a[1], p[2] - a[2]
+    sd = dx * nx + dy * ny + dz * nz
+    # barycentrics of the projection: sub-areas along the normal
+    px, py, pz = dx - sd * nx, dy - sd * ny, dz - sd * nz
+    wb = ((py * fz - pz * fy) * nx + (pz * fx - px * fz) * ny + (px * fy - py * fx) * nz) \
+        / area2
+    wc = ((ey * pz - ez * py) * nx + (ez * px - ex * pz) * ny + (ex * py - ey * px) * nz) \
+        / area2
+    return sd, nx, ny, nz, 1.0 - wb - wc, wb, wc
+
+
+@numba.njit(**JIT)
+def _along(ab, ac, p, v):
+    """Return the dot products of ``p - v`` with the edges ``ab`` and ``ac``."""
+    dx, dy, dz = p[0] - v[0], p[1] - v[1], p[2] - v[2]
+    return ab[0] * dx + ab[1] * dy + ab[2] * dz, ac[0] * dx + ac[1] * dy + ac[2] * dz
+
+
+@numba.njit(**JIT)
+def _closest(p, a, b, c):
+    """
+    Barycentric weights of the point of triangle (a, b, c) closest to p.
+
+    By the Voronoi region p projects into (a vertex, an edge or the inside; Ericson,
+    Real-Time Collision Detection, 5.1.5). Near the triangle's border the plane's normal
+    is the wrong direction to separate along: a point just past a free edge would be
+    pushed along the other layer's normal, and flipped in and out of it from step to step.
+    """
+    ab = (b[0] - a[0], b[1] - a[1], b[2] - a[2])
+    ac = (c[0] - a[0], c[1] - a[1], c[2] - a[2])
+    d1, d2 = _along(ab, ac, p, a)
+    if d1 <= 0.0 and d2 <= 0.0:
+        return 1.0, 0.0, 0.0
+    d3, d4 = _along(ab, ac, p, b)
+    if d3 >= 0.0 and d4 <= d3:
+        return 0.0, 1.0, 0.0
+    vc = d1 * d4 - d3 * d2
+    if vc <= 0.0 and d1 >= 0.0 and d3 <= 0.0:
+        t = d1 / (d1 - d3)
+        return 1.0 - t, t, 0.0
+    d5, d6 = _along(ab, ac, p, c)
+    if d6 >= 0.0 and d5 <= d6:
+        return 0.0, 0.0, 1.0
+    vb = d5 * d2 - d1 * d6
+    if vb <= 0.0 and d2 >= 0.0 and d6 <= 0.0:
+        t = d2 / (d2 - d6)
+        return 1.0 - t, 0.0, t
+    va = d3 * d6 - d5 * d4
+    if va <= 0.0 and d4 - d3 >= 0.0 and d5 - d6 >= 0.0:
+        t = (d4 - d3) / ((d4 - d3) + (d5 - d6))
+        return 0.0, 1.0 - t, t
+    total = va + vb + vc
+    if not total > 0.0:
+        return 1.0, 0.0, 0.0        # degenerate: its first vertex
+    return va / total, vb / total, vc / total
+
+
+@numba.njit(**JIT)
+def _offset(x, p, i, j, k, u, v, w):
+    """Vector from the point ``u x_i + v x_j + w x_k`` to point p, and its length."""
+    ox = x[0, p] - u * x[0, i] - v * x[0, j] - w * x[0, k]
+    oy = x[1, p] - u * x[1, i] - v * x[1, j] - w * x[1, k]
+    oz = x[2, p] - u * x[2, i] - v * x[2, j] - w * x[2, k]
+    return ox, oy, oz, math.sqrt(ox * ox + oy * oy + oz * oz)
+
+
+@numba.njit(**JIT)
+def _crossing(x0, x1, p, t, cols, ta, tb, shift, thickness):
+    """
+    Twice the side (+-2) p came from if it crossed triangle t between ``ta`` and ``tb``.
+
+    0 if it did not cross. Crossing: its distance to the triangle's plane changes sign,
+    and at the time that distance interpolates to zero it lies inside the triangle or
+    within ``thickness`` of its border. (Inside at either end instead flagged triangles
+    that turned over at a free corner, and pushed points 2.5 cm the wrong way; strictly
+    inside missed a point passing a free edge that lies exactly over another layer's
+    edge, and tangled the two edges.)
+    """
+    i, j, k = _triangle(t, cols)
+    sda, nax, nay, naz, _, _, _ = _plane(
+        _at(x0, x1, p, ta, shift), _at(x0, x1, i, ta, shift), _at(x0, x1, j, ta, shift),
+        _at(x0, x1, k, ta, shift))
+    sdb, nbx, nby, nbz, _, _, _ = _plane(
+        _at(x0, x1, p, tb, shift), _at(x0, x1, i, tb, shift), _at(x0, x1, j, tb, shift),
+        _at(x0, x1, k, tb, shift))
+    if not sda * sdb < 0.0:
+        return 0.0
+    if not nax * nbx + nay * nby + naz * nbz > 0.0:
+        return 0.0      # the triangle turned over: its plane's sign says nothing
+    tc = ta + (tb - ta) * sda / (sda - sdb)
+    pc, a = _at(x0, x1, p, tc, shift), _at(x0, x1, i, tc, shift)
+    b, c = _at(x0, x1, j, tc, shift), _at(x0, x1, k, tc, shift)
+    u, v, w = _closest(pc, a, b, c)
+    miss = 0.0
+    for d in range(3):
+        miss += (pc[d] - u * a[d] - v * b[d] - w * c[d]) ** 2
+    if miss < thickness * thickness:
+        return 2.0 if sda > 0.0 else -2.0
+    return 0.0
+
+
+@numba.njit(**JIT)
+def _near(x1, p, t, cols, thickness):
+    """
+    Side (+-1) if p ends nearer than ``thickness`` to triangle t, else 0.
+
+    The distance is to the triangle's closest point (inside, on an edge or a vertex). The
+    side is the one of the plane p is on at the end: a point that crossed the triangle
+    during the step is found by :func:`_crossing` (with the side it came from); one that
+    did not is on its own side. (The side of the plane at the start misled for points that
+    came round the triangle's edge: it pushed them through, 1000 % strain within half a
+    second.)
+    """
+    i, j, k = _triangle(t, cols)
+    u, v, w = _closest(x1[:, p], x1[:, i], x1[:, j], x1[:, k])
+    if not _offset(x1, p, i, j, k, u, v, w)[3] < thickness:
+        return 0.0
+    sd = _plane(x1[:, p], x1[:, i], x1[:, j], x1[:, k])[0]
+    return 1.0 if sd >= 0.0 else -1.0
+
+
+@numba.njit(**JIT)
+def _patch_boxes(x0, x1, rows, cols, size, thickness, boxes, ends, cones):
+    """
+    Swept box (grown by ``thickness``), boxes at both ends and normal cone of every patch.
+
+    Patch (I, J) holds the grid cells ``I size .. (I+1) size - 1`` by
+    ``J size .. (J+1) size - 1``. ``boxes[P] = (min xyz, max xyz)`` over its vertices at
+    the start and the end of the step; ``ends[P]``: see :func:`_block_boxes`;
+    ``cones[P] = (axis xyz, smallest cosine)``: the
+    axis is the normal of the patch's corner quadrilateral at the end of the step (its
+    diagonals' cross product), the cosine is the smallest between it and the normal of one
+    of its cells (their diagonals' cross product) at either time. A cell's normal stands
+    for its two triangles' (a cell folded along its diagonal is caught by its
+    neighbours').
+    """
+    pr, pc = boxes.shape[0], boxes.shape[1]
+    for bi in range(pr):
+        for bj in range(pc):
+            r0, r1 = bi * size, min((bi + 1) * size, rows - 1)
+            c0, c1 = bj * size, min((bj + 1) * size, cols - 1)
+            box, cone = boxes[bi, bj], cones[bi, bj]
+            ax, ay, az = _quad_normal(x1, r0 * cols + c0, r0 * cols + c1, r1 * cols + c0,
+                                      r1 * cols + c1)
+            cone[0], cone[1], cone[2] = ax, ay, az
+            low = 1.0 if ax * ax + ay * ay + az * az > 0.0 else -1.0
+            _block_boxes(x0, x1, r0, r1, c0, c1, cols, ends[bi, bj])
+            for d in range(3):
+                box[d] = min(ends[bi, bj, d], ends[bi, bj, 6 + d])
+                box[3 + d] = max(ends[bi, bj, 3 + d], ends[bi, bj, 9 + d])
+            for r in range(r0, r1):
+                for x in (x0, x1):
+                    for c in range(c0, c1):
+                        i = r * cols + c
+                        nx, ny, nz = _quad_normal(x, i, i + 1, i + cols, i + cols + 1)
+                        low = min(low, nx * ax + ny * ay + nz * az)
+            for d in range(3):
+                box[d] -= thickness
+                box[3 + d] += thickness
+            cone[3] = low
+
+
+@numba.njit(**JIT)
+def _quad_normal(x, a, b, c, d):
+    """
+    Return the unit normal of the quadrilateral a, b (top), c, d (bottom).
+
+    From its diagonals a-d and b-c (0 if degenerate).
+    """
+    ex, ey, ez = x[0, d] - x[0, a], x[1, d] - x[1, a], x[2, d] - x[2, a]
+    fx, fy, fz = x[0, c] - x[0, b], x[1, c] - x[1, b], x[2, c] - x[2, b]
+    nx, ny, nz = ey * fz - ez * fy, ez * fx - ex * fz, ex * fy - ey * fx
+    norm = math.sqrt(nx * nx + ny * ny + nz * nz)
+    if not norm > 0.0:
+        return 0.0, 0.0, 0.0
+    return nx / norm, ny / norm, nz / norm
+
+
+@numba.njit(**JIT)
+def _overlap(a, b):
+    return (a[0] <= b[3] and b[0] <= a[3] and a[1] <= b[4] and b[1] <= a[4]
+            and a[2] <= b[5] and b[2] <= a[5])
+
+
+@numba.njit(**JIT)
+def _pair_needed(boxes, cones, ai, aj, bi, bj):
+    """
+    Return whether patches A and B may touch.
+
+    Their boxes overlap and, if they are the same patch or next to each other, their
+    normals spread over more than ``FLAT_COSINE``
+    allows (a surface whose normals all lie within a cone narrower than a hemisphere
+    around one axis cannot fold onto itself; the rest of that criterion, a contour that
+    crosses itself, needs shears a cloth does not take).
+    """
+    if not _overlap(boxes[ai, aj], boxes[bi, bj]):
+        return False
+    if abs(ai - bi) > 1 or abs(aj - bj) > 1:
+        return True
+    ca, cb = cones[ai, aj], cones[bi, bj]
+    if ai == bi and aj == bj:
+        return ca[3] < FLAT_COSINE
+    # both cones within FLAT_COSINE of the mean axis: the angles add up
+    between = ca[0] * cb[0] + ca[1] * cb[1] + ca[2] * cb[2]
+    spread = math.acos(min(1.0, max(-1.0, between))) + math.acos(ca[3]) + math.acos(cb[3])
+    return spread > 2.0 * math.acos(FLAT_COSINE)
+
+
+@numba.njit(**JIT)
+def _block_boxes(x0, x1, r0, r1, c0, c1, cols, out):
+    """
+    Write the boxes of a block of grid points at both ends of the step and its motion.
+
+    Rows ``r0 .. r1`` by columns ``c0 .. c1`` (inclusive):
+    ``out = (min, max at x0, min, max at x1, mean displacement)``.
+    """
+    for d in range(3):
+        out[d], out[3 + d] = np.inf, -np.inf
+        out[6 + d], out[9 + d] = np.inf, -np.inf
+        out[12 + d] = 0.0
+    for r in range(r0, r1 + 1):
+        for c in range(c0, c1 + 1):
+            i = r * cols + c
+            for d in range(3):
+                out[d] = min(out[d], x0[d, i])
+                out[3 + d] = max(out[3 + d], x0[d, i])
+                out[6 + d] = min(out[6 + d], x1[d, i])
+                out[9 + d] = max(out[9 + d], x1[d, i])
+                out[12 + d] += x1[d, i] - x0[d, i]
+    for d in range(3):
+        out[12 + d] /= (r1 - r0 + 1) * (c1 - c0 + 1)
+
+
+@numba.njit(**JIT)
+def _moving_box(ends, shift, reach, out):
+    """
+    Write the box a block sweeps in a frame moving by ``shift``, grown by ``reach``.
+
+    Paths in such a frame are the same up to one translation, so every test between two
+    blocks may use one: the pair's mean motion, which leaves boxes as small as the
+    blocks' motion relative to each other (a swinging cloth moves a point many grid
+    spacings a step; its neighbours move with it).
+    """
+    for d in range(3):
+        out[d] = min(ends[d], ends[6 + d] - shift[d]) - reach
+        out[3 + d] = max(ends[3 + d], ends[9 + d] - shift[d]) + reach
+
+
+@numba.njit(**JIT)
+def _sub_boxes(x0, x1, rows, cols, bi, bj, subs):
+    """
+    Boxes (:func:`_block_boxes`) of patch (bi, bj)'s blocks of ``SUB`` x ``SUB`` cells.
+
+    A point tests only the triangles of the blocks its path comes near: 16 boxes and a
+    few blocks' triangles where the whole patch's 128 triangles cost 4x more on a cloth
+    lying on itself.
+    """
+    per = PATCH // SUB
+    for si in range(bi * per, min((bi + 1) * per, subs.shape[0])):
+        for sj in range(bj * per, min((bj + 1) * per, subs.shape[1])):
+            _block_boxes(x0, x1, si * SUB, min((si + 1) * SUB, rows - 1), sj * SUB,
+                         min((sj + 1) * SUB, cols - 1), cols, subs[si, sj])
+
+
+@numba.njit(**JIT)
+def _path_box(x0, x1, p, shift, reach, out):
+    """Write the box p's path sweeps in a frame moving by ``shift``, grown by ``reach``."""
+    for d in range(3):
+        out[d] = min(x0[d, p], x1[d, p] - shift[d]) - reach
+        out[3 + d] = max(x0[d, p], x1[d, p] - shift[d]) + reach
+
+
+@numba.njit(**JIT)
+def _pair_side(x0, x1, p, t, cols, thickness, substeps, shift):
+    """
+    Return whether p and t make a pair: p's side if it crossed t (+-2) or ends near (+-1).
+
+    Every sub-interval is tested, also when p ends on the side it started on: skipping
+    those (a point that went through and back) doubled the folded 129 x 129 drop's
+    largest strain, since the tangle they leave behind is resolved later and worse.
+    """
+    for sub in range(substeps):
+        side = _crossing(x0, x1, p, t, cols, sub / substeps, (sub + 1) / substeps, shift,
+                         thickness)
+        if side != 0.0:
+            return side
+    return _near(x1, p, t, cols, thickness)
+
+
+@numba.njit(**JIT)
+def _points_against(x0, x1, rows, cols, thickness, substeps, subs, shift, ai, aj, bi, bj,
+                    pairs, sides, count):
+    """
+    Test patch A's points against patch B's triangles; returns the new pair count.
+
+    Boxes are taken in the frame moving by ``shift`` (see :func:`_moving_box`).
+    """
+    path, block = np.empty(6), np.empty(6)
+    r0, r1 = ai * PATCH, min((ai + 1) * PATCH, rows - 1)
+    c0, c1 = aj * PATCH, min((aj + 1) * PATCH, cols - 1)
+    # the points a patch owns: its cells' top-left corners, and the grid's last row and
+    # column for the patches along them
+    r_end = r1 + 1 if r1 == rows - 1 else r1
+    c_end = c1 + 1 if c1 == cols - 1 else c1
+    per = PATCH // SUB
+    s0, s1 = bi * per, min((bi + 1) * per, subs.shape[0])
+    t0, t1 = bj * per, min((bj + 1) * per, subs.shape[1])
+    for r in range(r0, r_end):
+        for c in range(c0, c_end):
+            p = r * cols + c
+            _path_box(x0, x1, p, shift, thickness, path)
+            for si in range(s0, s1):
+                for sj in range(t0, t1):
+                    _moving_box(subs[si, sj], shift, 0.0, block)
+                    if not _overlap(path, block):
+                        continue
+                    for u in range(si * SUB, min((si + 1) * SUB, rows - 1)):
+                        for v in range(sj * SUB, min((sj + 1) * SUB, cols - 1)):
+                            for half in range(2):
+                                t = 2 * (u * (cols - 1) + v) + half
+                                if _neighbours(p, t, cols):
+                                    continue
+                                i, j, k = _triangle(t, cols)
+                                if not _near_box(x0, x1, p, i, j, k, shift, thickness):
+                                    continue
+                                side = _pair_side(x0, x1, p, t, cols, thickness, substeps,
+                                                  shift)
+                                if side != 0.0:
+                                    if count < pairs.shape[0]:
+                                        pairs[count, 0], pairs[count, 1] = p, t
+                                        sides[count] = side
+                                    count += 1
+    return count
+
+
+@numba.njit(**JIT)
+def _near_box(x0, x1, p, i, j, k, shift, thickness):
+    """
+    Return whether p's path comes within ``thickness`` of triangle (i, j, k)'s box.
+
+    Both swept over the step in the frame moving by ``shift``.
+    """
+    for d in range(3):
+        e = shift[d]
+        low = min(x0[d, i], x0[d, j], x0[d, k], x1[d, i] - e, x1[d, j] - e, x1[d, k] - e)
+        high = max(x0[d, i], x0[d, j], x0[d, k], x1[d, i] - e, x1[d, j] - e, x1[d, k] - e)
+        if min(x0[d, p], x1[d, p] - e) - thickness > high or \
+                max(x0[d, p], x1[d, p] - e) + thickness < low:
+            return False
+    return True
+
+
+@numba.njit(**JIT)
+def _detect(x0, x1, rows, cols, thickness, substeps, dirty, pairs, sides):
+    """
+    Collect (point, triangle) pairs and their sides over the step.
+
+    Patches of ``PATCH`` x ``PATCH`` grid cells are culled by their swept boxes and, next
+    to each other, by their normal cones (:func:`_pair_needed`); the pairs of patches
+    left test points against triangles. Only pairs of patches with at least one marked
+    in ``dirty`` are tested (after a response, those it moved a point of: elsewhere
+    nothing changed since the last detection). Returns how many pairs were found (those
+    beyond the arrays' capacity are not kept).
+    """
+    pr, pc = (rows - 2) // PATCH + 1, (cols - 2) // PATCH + 1
+    boxes = np.empty((pr, pc, 6))
+    ends = np.empty((pr, pc, 15))
+    cones = np.empty((pr, pc, 4))
+    _patch_boxes(x0, x1, rows, cols, PATCH, thickness, boxes, ends, cones)
+    box_a, box_b, shift = np.empty(6), np.empty(6), np.empty(3)
+    # blocks' boxes, computed for the patches that meet another one
+    subs = np.empty(((rows - 2) // SUB + 1, (cols - 2) // SUB + 1, 15))
+    ready = np.zeros((pr, pc), dtype=np.bool_)
+    # sweep and prune along x over the patches' boxes
+    lows = np.empty(pr * pc)
+    for a in range(pr * pc):
+        lows[a] = boxes[a // pc, a % pc, 0]
+    order = np.argsort(lows)
+    count = 0
+    for m in range(pr * pc):
+        a = order[m]
+        ai, aj = a // pc, a % pc
+        for m2 in range(m, pr * pc):
+            b = order[m2]
+            bi, bj = b // pc, b % pc
+            if boxes[bi, bj, 0] > boxes[ai, aj, 3]:
+                break
+            if not (dirty[ai, aj] or dirty[bi, bj]):
+                continue
+            if not _pair_needed(boxes, cones, ai, aj, bi, bj):
+                continue
+            # again in the frame of the two patches' mean motion
+            for d in range(3):
+                shift[d] = 0.5 * (ends[ai, aj, 12 + d] + ends[bi, bj, 12 + d])
+            _moving_box(ends[ai, aj], shift, thickness, box_a)
+            _moving_box(ends[bi, bj], shift, thickness, box_b)
+            if not _overlap(box_a, box_b):
+                continue
+            for patch_i, patch_j in ((ai, aj), (bi, bj)):
+                if not ready[patch_i, patch_j]:
+                    _sub_boxes(x0, x1, rows, cols, patch_i, patch_j, subs)
+                    ready[patch_i, patch_j] = True
+            count = _points_against(x0, x1, rows, cols, thickness, substeps, subs, shift,
+                                    ai, aj, bi, bj, pairs, sides, count)
+            if a != b:
+                count = _points_against(x0, x1, rows, cols, thickness, substeps, subs, shift,
+                                        bi, bj, ai, aj, pairs, sides, count)
+    return count
+
+
+@numba.njit(**JIT)
+def _longest_move(x0, x1, ta, tb, shift):
+    """Return the longest path of a point between ``ta`` and ``tb`` in the shifted frame."""
+    longest = 0.0
+    for i in range(x0.shape[1]):
+        ex = (tb - ta) * (x1[0, i] - x0[0, i] - shift[0])
+        ey = (tb - ta) * (x1[1, i] - x0[1, i] - shift[1])
+        ez = (tb - ta) * (x1[2, i] - x0[2, i] - shift[2])
+        longest = max(longest, math.sqrt(ex * ex + ey * ey + ez * ez))
+    return longest
+
+
+@numba.njit(**JIT)
+def _longest_edge(x, rows, cols):
+    """Return the longest structural or diagonal edge of the triangles (m)."""
+    longest = 0.0
+    for r in range(rows):
+        for c in range(cols):
+            i = r * cols + c
+            for dr, dc in ((0, 1), (1, 0), (1, 1)):
+                if r + dr < rows and c + dc < cols:
+                    j = i + dr * cols + dc
+                    ex, ey, ez = x[0, j] - x[0, i], x[1, j] - x[1, i], x[2, j] - x[2, i]
+                    longest = max(longest, ex * ex + ey * ey + ez * ez)
+    return math.sqrt(longest)
+
+
+@numba.njit(**JIT)
+def _shift(x, i, weight, nx, ny, nz):
+    x[0, i] += weight * nx
+    x[1, i] += weight * ny
+    x[2, i] += weight * nz
+
+
+@numba.njit(**JIT)
+def _move(x, qd, dv, i, weight, nx, ny, nz, h):
+    x[0, i] += weight * nx
+    x[1, i] += weight * ny
+    x[2, i] += weight * nz
+    qd[0, i] += weight * nx / h
+    qd[1, i] += weight * ny / h
+    qd[2, i] += weight * nz / h
+    dv[0, i] += weight * nx / h
+    dv[1, i] += weight * ny / h
+    dv[2, i] += weight * nz / h
+
+
+@numba.njit(**JIT)
+def _separation(x, p, i, j, k, side, thickness):
+    """
+    Return how to push p away from triangle (i, j, k): ``(n xyz, gap, u, v, w)``.
+
+    The direction, how far p is inside the thickness (negative: violated) and the
+    triangle's weights.
+
+    A pair found crossing (``|side| == 2``) goes back along the triangle's normal to the
+    side it came from, at its projection (clipped into the triangle). A pair found near
+    separates from the triangle's closest point: along the side's normal where that is
+    inside the triangle, along the line from the closest point on an edge or vertex to p
+    otherwise.
+    """
+    sd, nx, ny, nz, u, v, w = _plane(x[:, p], x[:, i], x[:, j], x[:, k])
+    sign = 1.0 if side > 0.0 else -1.0
+    if abs(side) > 1.5:
+        u, v, w = max(u, 0.0), max(v, 0.0), max(w, 0.0)
+        total = u + v + w
+        if not total > 0.0:
+            return 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
+        return sign * nx, sign * ny, sign * nz, sign * sd - thickness, u / total, \
+            v / total, w / total
+    u, v, w = _closest(x[:, p], x[:, i], x[:, j], x[:, k])
+    ox, oy, oz, dist = _offset(x, p, i, j, k, u, v, w)
+    if (u > 0.0 and v > 0.0 and w > 0.0) or not dist > 0.0:
+        return sign * nx, sign * ny, sign * nz, sign * sd - thickness, u, v, w
+    return ox / dist, oy / dist, oz / dist, dist - thickness, u, v, w
+
+
+@numba.njit(**JIT)
+def _resolve(x0, x1, qd, dv, inv_mass, cols, p, t, side, thickness, friction, h, one_side):
+    """
+    Push one pair apart (and apply its friction); returns whether it was violated.
+
+    ``one_side``: only the point moves (only the triangle if the point is held): a pair
+    pushed apart alone is then satisfied whatever its neighbours do.
+    """
+    i, j, k = _triangle(t, cols)
+    nx, ny, nz, gap, u, v, w = _separation(x1, p, i, j, k, side, thickness)
+    if not gap < 0.0:
+        return False
+    rx = (x1[0, p] - x0[0, p]) - u * (x1[0, i] - x0[0, i]) - v * (x1[0, j] - x0[0, j]) \
+        - w * (x1[0, k] - x0[0, k])
+    ry = (x1[1, p] - x0[1, p]) - u * (x1[1, i] - x0[1, i]) - v * (x1[1, j] - x0[1, j]) \
+        - w * (x1[1, k] - x0[1, k])
+    rz = (x1[2, p] - x0[2, p]) - u * (x1[2, i] - x0[2, i]) - v * (x1[2, j] - x0[2, j]) \
+        - w * (x1[2, k] - x0[2, k])
+    if -gap > 2.0 * thickness + math.sqrt(rx * rx + ry * ry + rz * rz):
+        return False
+    ip, ii, ij, ik = inv_mass[p], inv_mass[i], inv_mass[j], inv_mass[k]
+    if one_side:
+        if ip > 0.0:
+            ii, ij, ik = 0.0, 0.0, 0.0
+        else:
+            ip = 0.0
+    denom = ip + u * u * ii + v * v * ij + w * w * ik
+    if not denom > 0.0:
+        return False
+    lam = -gap / denom
+    # positions apart; velocities lose only their approach (inelastic): a push turned
+    # into velocity (push / h) made the layers bounce and stretched the cloth
+    _shift(x1, p, lam * ip, nx, ny, nz)
+    _shift(x1, i, -lam * ii * u, nx, ny, nz)
+    _shift(x1, j, -lam * ij * v, nx, ny, nz)
+    _shift(x1, k, -lam * ik * w, nx, ny, nz)
+    vn = 0.0
+    for d, n_d in ((0, nx), (1, ny), (2, nz)):
+        vn += (qd[d, p] - u * qd[d, i] - v * qd[d, j] - w * qd[d, k]) * n_d
+    if vn < 0.0:
+        mu = -vn / denom
+        for d, n_d in ((0, nx), (1, ny), (2, nz)):
+            for idx, wt in ((p, mu * ip), (i, -mu * ii * u), (j, -mu * ij * v),
+                            (k, -mu * ik * w)):
+                qd[d, idx] += wt * n_d
+                dv[d, idx] += wt * n_d
+    if friction > 0.0:
+        push = lam * (ip + u * u * ii + v * v * ij + w * w * ik)
+        rx, ry, rz = rx + push * nx, ry + push * ny, rz + push * nz
+        rn = rx * nx + ry * ny + rz * nz
+        rx, ry, rz = rx - rn * nx, ry - rn * ny, rz - rn * nz
+        slide = math.sqrt(rx * rx + ry * ry + rz * rz)
+        if slide > 0.0:
+            stop = min(slide, friction * -gap) / denom / slide
+            _move(x1, qd, dv, p, -stop * ip, rx, ry, rz, h)
+            _move(x1, qd, dv, i, stop * ii * u, rx, ry, rz, h)
+            _move(x1, qd, dv, j, stop * ij * v, rx, ry, rz, h)
+            _move(x1, qd, dv, k, stop * ik * w, rx, ry, rz, h)
+    return True
+
+
+@numba.njit(**JIT)
+def self_contact(
+        # inputs / outputs: the level after the step and its velocity change, corrected
+        q, qd, dv,
+        # inputs: positions at the start of the step, masses, holds
+        q_prev, mass, hold_kind,
+        # inputs: cloth thickness (m), friction coefficient, resolution passes, step (s)
+        thickness, friction, iterations, h):
+    """
+    Keep a level's points ``thickness`` away from its triangles (see the module docstring).
+
+    Returns ``(pairs, substeps, dropped)``: the pairs found, the detection's
+    sub-intervals, and pairs beyond the per-step capacity (0 normally).
+    """
+    rows, cols = hold_kind.shape
+    n = rows * cols
+    if rows < 2 or cols < 2:
+        return 0, 0, 0
+    x1, x0 = q.reshape((3, n)), q_prev.reshape((3, n))
+    qdf, dvf = qd.reshape((3, n)), dv.reshape((3, n))
+    inv_mass = np.empty(n)
+    for r in range(rows):
+        for c in range(cols):
+            inv_mass[r * cols + c] = 0.0 if hold_kind[r, c] != FREE else 1.0 / mass[r, c]
+    # the mean displacement; sub-intervals so that no point moves more than half the
+    # longest edge relative to it in one
+    shift = np.zeros(3)
+    for d in range(3):
+        for i in range(n):
+            shift[d] += x1[d, i] - x0[d, i]
+        shift[d] /= n
+    edge = max(_longest_edge(x0, rows, cols), _longest_edge(x1, rows, cols))
+    moved = _longest_move(x0, x1, 0.0, 1.0, shift)
+    if not (math.isfinite(moved) and math.isfinite(edge)):
+        return 0, 0, 0          # a blown-up step: the solver's check refuses it
+    substeps = min(MAX_SUBSTEPS, max(MIN_SUBSTEPS, int(math.ceil(moved / (0.5 * edge)))))
+    pairs = np.empty((PAIRS_PER_POINT * n, 2), dtype=np.int64)
+    sides = np.empty(PAIRS_PER_POINT * n)
+    first, dropped = -1, 0
+    dirty = np.ones(((rows - 2) // PATCH + 1, (cols - 2) // PATCH + 1), dtype=np.bool_)
+    # pairs are pushed a little further than detection looks: one pushed to exactly the
+    # thickness would be found again by rounding, and every round would run
+    target = thickness * (1.0 + SLACK)
+    for attempt in range(iterations + 1):
+        # pushing a pair apart can bring a point near another triangle: detect again
+        found = _detect(x0, x1, rows, cols, thickness, substeps, dirty, pairs, sides)
+        kept = min(found, pairs.shape[0])
+        first = found if first < 0 else first
+        dropped = max(dropped, found - kept)
+        if found == 0:
+            break
+        # the last round moves points alone: Gauss-Seidel over a cluster of pairs that
+        # share vertices converges slowly (a fast fold left 1-3 of 300 pairs crossed
+        # after 16 rounds)
+        dirty[:, :] = False
+        for _ in range(RESOLVE_PASSES):
+            for e in range(kept):
+                if _resolve(x0, x1, qdf, dvf, inv_mass, cols, pairs[e, 0], pairs[e, 1],
+                            sides[e], target, friction, h, attempt == iterations):
+                    _mark_pair(pairs[e, 0], pairs[e, 1], rows, cols, dirty)
+    return first, substeps, dropped
+
+
+@numba.njit(**JIT)
+def _mark_pair(p, t, rows, cols, dirty):
+    """Mark the patches of every cell around the point and the triangle's vertices."""
+    i, j, k = _triangle(t, cols)
+    for v in (p, i, j, k):
+        r, c = v // cols, v % cols
+        for cell_r in (r - 1, r):
+            for cell_c in (c - 1, c):
+                if 0 <= cell_r < rows - 1 and 0 <= cell_c < cols - 1:
+                    dirty[cell_r // PATCH, cell_c // PATCH] = True

@@ -1,0 +1,94 @@
+"""
+Self-contact as a solver runs it: on the finest simulated level, every n-th step.
+
+The kernel (:mod:`hcloth_ros.core.kernels.self_contact`) keeps one level's points a
+thickness away from its own triangles and stops them crossing one between two positions.
+This module decides which level, between which positions, and what the coarser levels do
+afterwards.
+"""
+
+import numpy as np
+
+# Rounds of self-contact and strain limiting a check runs at most (see SelfContact.apply).
+ROUNDS = 3
+
+
+class SelfContact:
+    """
+    Settings and memory of the cloth's self-contact.
+
+    :param thickness: points stay this far (m) from the triangles of their own level.
+    :param friction: friction coefficient between layers of the cloth.
+    :param iterations: most rounds of detection and response in one kernel call.
+    :param interval: check every n-th step (1: every step). Between checks the cloth may
+        pass through itself; the check then runs from the positions of the last one, so
+        a point that ended up on the other side of a triangle is brought back (a crossing
+        that is undone within the interval goes unseen).
+    """
+
+    def __init__(self, thickness, friction=0.3, iterations=8, interval=1):
+        if not (np.isfinite(thickness) and 0.0 < thickness <= 0.1):
+            raise ValueError(f'thickness must be in (0, 0.1] m or None, got {thickness}')
+        if not (np.isfinite(friction) and 0.0 <= friction <= 10.0):
+            raise ValueError(f'self_friction must be in [0, 10], got {friction}')
+        for name, value, high in (('self_contact_iterations', iterations, 100),
+                                  ('self_contact_interval', interval, 1000)):
+            if not 1 <= int(value) <= high:
+                raise ValueError(f'{name} must be in 1..{high}, got {value}')
+        self.thickness = float(thickness)
+        self.friction = float(friction)
+        self.iterations = int(iterations)
+        self.interval = int(interval)
+        self._start = None          # finest positions at the last check (interval > 1)
+        self._key = None            # (level, time) the next step must start from
+        self._steps = 0             # steps since the last check
+
+    def _due(self, k, state):
+        """Whether this step checks; restarts the count after a reset, edit or new level."""
+        if self._key != (k, state.time):
+            self._steps = 0
+            self._start = state.q[k].copy() if self.interval > 1 else None
+        return self._steps + 1 >= self.interval
+
+    def apply(self, solver, levels, state, holds, h):
+        """
+        Run on the finest of ``levels`` (the solver's step buffers), then down the hierarchy.
+
+        Every free point may move (inherited ones too); the coarser levels then take the
+        finest level's state at the points they share, so they start the next step where
+        the contact left the cloth instead of dragging it back through itself. Pushes
+        move single points: strain limiting (if the solver has it) spreads them to their
+        neighbours, then contact runs again, as it may have pulled points back in, up to
+        ``ROUNDS`` times. Returns the pairs found, or None when this step does not check.
+        """
+        k = levels[-1]
+        if not self._due(k, state):
+            return None
+        lv, kit = solver.model.level(k), solver.kernels(k)
+        start = state.q[k] if self._start is None else self._start
+        span = (self._steps + 1) * h    # the time the kernel's paths cover
+        pairs = None
+        for attempt in range(ROUNDS):
+            found, _, dropped = kit.self_contact(
+                solver._q[k], solver._qd[k], solver._dv[k], start, lv.mass, holds.kind,
+                self.thickness, self.friction, self.iterations, span)
+            pairs = found if pairs is None else pairs
+            if not found or solver.strain_limit is None or attempt == ROUNDS - 1:
+                break
+            kit.strain_limit(solver._q[k], solver._qd[k], solver._dv[k], lv.rest, holds.kind,
+                             False, solver.strain_limit, solver.strain_refine_iterations,
+                             solver.strain_tolerance, h, solver._scratch[k])
+        if dropped:
+            solver._extra['self_contact_dropped'] = dropped
+        if pairs:
+            for fine in range(k, levels[0], -1):
+                for arrays in (solver._q, solver._qd, solver._dv):
+                    kit.inject(arrays[fine], arrays[fine - 1])
+        return pairs
+
+    def committed(self, k, state, checked):
+        """Remember where the next step starts (the step to ``state`` was accepted)."""
+        self._key = (k, state.time)
+        self._steps = 0 if checked else self._steps + 1
+        if checked and self._start is not None:
+            np.copyto(self._start, state.q[k])
