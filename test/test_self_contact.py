@@ -265,6 +265,31 @@ def test_two_layers_dropped_stay_apart(solver_name):
     assert results[None][1] > 20
 
 
+@pytest.mark.parametrize('solver_name', ['multigrid', 'hierarchical'])
+def test_layers_stay_apart_while_levels_come_and_go(solver_name):
+    """
+    Levels on demand: self-contact runs on whichever level is the finest.
+
+    The folded drop simulates 33 x 33, then 17 x 17 only (steps 15-29), then 33 x 33
+    again, restarted from the coarser state: on the finest level of every step nothing
+    is near and nothing crossed, through both switches.
+    """
+    model = folded_model()
+    state = folded_state(model, 0.1)
+    solver = make_solver(solver_name, model, thickness=THICKNESS)
+    control = Control(model)
+    seen = []
+    for step in range(45):
+        k = 1 if 15 <= step < 30 else 2
+        assert solver.set_finest_level(k, state, control) == k
+        before = state.q[k].copy()
+        report = solver.step(state, control, H)
+        assert report.ok, report.reason
+        assert violations(before, state.q[k], THICKNESS * 0.9) == (0, 0), (step, k)
+        seen.append(report.extra['self_contact_pairs'] > 0)
+    assert any(seen[15:30]) and any(seen[30:])     # contact on both levels
+
+
 def test_every_third_step_checks_from_the_last_check():
     """
     Check every third step only, from the positions of the last check.
