@@ -75,7 +75,7 @@ PARAMS = [
     Param('self_contact.friction', 0.3, 'self-contact: friction coefficient between layers',
           0.0, 10.0),
     Param('self_contact.iterations', 8, 'self-contact: most rounds of detection and '
-          'response a check', 1, 100),
+          'response a check (then one more moving points alone)', 1, 100),
     Param('self_contact.interval', 1, 'self-contact: check every n-th step (cheaper, but '
           'layers may pass through each other in between)', 1, 1000),
     Param('pinned_points', [0, 8], 'finest-level point ids that hold still (see README '

@@ -247,6 +247,8 @@ def test_two_layers_dropped_stay_apart(solver_name):
 
     With self-contact no finest point ends nearer than the thickness to the other layer
     or on its far side; without it the top layer falls through (the check is not empty).
+    (Self-contact pushes the bottom layer up to 1.9 mm into the ground: a known fault,
+    see SelfContact.apply.)
     """
     results = {}
     for thickness in (THICKNESS, None):
@@ -259,8 +261,8 @@ def test_two_layers_dropped_stay_apart(solver_name):
             before = state.q[2].copy()
             report = solver.step(state, control, H)
             assert report.ok, report.reason
-            crossed += violations(before, state.q[2], THICKNESS * 0.9)[1]
-        results[thickness] = violations(before, state.q[2], THICKNESS * 0.9)[0], crossed
+            crossed += violations(before, state.q[2], THICKNESS)[1]
+        results[thickness] = violations(before, state.q[2], THICKNESS)[0], crossed
     assert results[THICKNESS] == (0, 0)
     assert results[None][1] > 20
 
@@ -285,7 +287,7 @@ def test_layers_stay_apart_while_levels_come_and_go(solver_name):
         before = state.q[k].copy()
         report = solver.step(state, control, H)
         assert report.ok, report.reason
-        assert violations(before, state.q[k], THICKNESS * 0.9) == (0, 0), (step, k)
+        assert violations(before, state.q[k], THICKNESS) == (0, 0), (step, k)
         seen.append(report.extra['self_contact_pairs'] > 0)
     assert any(seen[15:30]) and any(seen[30:])     # contact on both levels
 
@@ -308,7 +310,7 @@ def test_every_third_step_checks_from_the_last_check():
         assert report.ok, report.reason
         if 'self_contact_pairs' in report.extra:
             checked.append(step)
-            assert violations(last, state.q[2], THICKNESS * 0.9) == (0, 0)
+            assert violations(last, state.q[2], THICKNESS) == (0, 0)
             last = state.q[2].copy()
     assert checked == list(range(3, 46, 3))
 
@@ -317,10 +319,8 @@ def test_fast_fold_does_not_tunnel():
     """
     The top layer moves at 3 m/s into the bottom one, 5 cm a step over a 2 cm gap.
 
-    Continuous detection keeps it on its side; without self-contact it goes through. The
-    rows within four of the fold are not counted: the impact crushes the fold to a bend
-    tighter than the 3 cm row spacing can take, where the mesh's own triangles overlap
-    (1-3 points of them end a step crossed; the note of issue 10 says so).
+    Continuous detection keeps every point on its side, the crushed fold's too; without
+    self-contact it goes through.
     """
     results = {}
     for thickness in (THICKNESS, None):
@@ -332,12 +332,11 @@ def test_fast_fold_does_not_tunnel():
         solver = make_solver('multigrid', model, thickness=thickness)
         control = Control(model)
         crossed = 0
-        fold = range(m - 4, m + 5)
         for _ in range(4):
             before = state.q[2].copy()
             report = solver.step(state, control, H)
             assert report.ok, report.reason
-            crossed += violations(before, state.q[2], THICKNESS * 0.9, skip_rows=fold)[1]
+            crossed += violations(before, state.q[2], THICKNESS)[1]
         results[thickness] = crossed
     assert results[THICKNESS] == 0
     assert results[None] > 50

@@ -19,7 +19,8 @@ class SelfContact:
 
     :param thickness: points stay this far (m) from the triangles of their own level.
     :param friction: friction coefficient between layers of the cloth.
-    :param iterations: most rounds of detection and response in one kernel call.
+    :param iterations: most rounds of detection and response in one kernel call (then one
+        more that moves points alone).
     :param interval: check every n-th step (1: every step). Between checks the cloth may
         pass through itself; the check then runs from the positions of the last one, so
         a point that ended up on the other side of a triangle is brought back (a crossing
@@ -60,6 +61,11 @@ class SelfContact:
         move single points: strain limiting (if the solver has it) spreads them to their
         neighbours, then contact runs again, as it may have pulled points back in, up to
         ``ROUNDS`` times. Returns the pairs found, or None when this step does not check.
+
+        Known fault: obstacles do not run after it, so a bottom layer pressed onto the
+        ground by the top one ends up to 1.9 mm in it (the folded drop). Running them after
+        each round with the points they moved held fixed that, but the folded drop's
+        largest strain went from 1.35 to 3.06 (129 x 129) and 257 x 257 was refused.
         """
         k = levels[-1]
         if not self._due(k, state):
@@ -67,12 +73,13 @@ class SelfContact:
         lv, kit = solver.model.level(k), solver.kernels(k)
         start = state.q[k] if self._start is None else self._start
         span = (self._steps + 1) * h    # the time the kernel's paths cover
-        pairs = None
+        pairs, dropped = None, 0
         for attempt in range(ROUNDS):
-            found, _, dropped = kit.self_contact(
+            found, _, lost = kit.self_contact(
                 solver._q[k], solver._qd[k], solver._dv[k], start, lv.mass, holds.kind,
                 self.thickness, self.friction, self.iterations, span)
             pairs = found if pairs is None else pairs
+            dropped = max(dropped, lost)
             if not found or solver.strain_limit is None or attempt == ROUNDS - 1:
                 break
             kit.strain_limit(solver._q[k], solver._qd[k], solver._dv[k], lv.rest, holds.kind,

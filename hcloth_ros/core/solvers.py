@@ -84,7 +84,8 @@ class Solver:
         (m) from its own triangles and no point crosses one during a step
         (:class:`~hcloth_ros.core.self_contact.SelfContact`); None switches it off.
     :param self_friction: friction coefficient between layers of the cloth.
-    :param self_contact_iterations: most rounds of detection and response a check.
+    :param self_contact_iterations: most rounds of detection and response a check (then one
+        more that moves points alone).
     :param self_contact_interval: check every n-th step.
     """
 
@@ -189,11 +190,15 @@ class Solver:
                 self.strain_refine_iterations if inherited_fixed else self.strain_iterations,
                 self.strain_tolerance, h, self._scratch[k])
             self._extra[f'strain_sweeps_{k}'] = sweeps
+        self._obstacles(k, state, holds, inherited_fixed)
+
+    def _obstacles(self, k, state, holds, inherited_fixed):
+        """Move level k's points out of the scene's obstacles (see kernels.contact)."""
         scene = self.model.scene
         if scene is not None and not scene.empty:
-            if kit.contact(self._q[k], self._qd[k], self._dv[k], state.q[k], holds.kind,
-                           inherited_fixed, scene.planes, scene.boxes, scene.spheres,
-                           scene.friction, scene.margin):
+            if self.kernels(k).contact(self._q[k], self._qd[k], self._dv[k], state.q[k],
+                                       holds.kind, inherited_fixed, scene.planes, scene.boxes,
+                                       scene.spheres, scene.friction, scene.margin):
                 self._touched = True
 
     def step(self, state, control, dt):
