@@ -15,7 +15,7 @@ def jit_warm():
 
     So that the timings of the tests themselves are not dominated by compilation.
     """
-    return warm_up()
+    return warm_up(self_contact=True)
 
 
 @pytest.fixture

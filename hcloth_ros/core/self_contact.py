@@ -45,7 +45,13 @@ class SelfContact:
         self._steps = 0             # steps since the last check
 
     def _due(self, k, state):
-        """Whether this step checks; restarts the count after a reset, edit or new level."""
+        """
+        Return whether this step checks.
+
+        The count and the start positions restart when the state is not where the last
+        step left it in time (a reset) or the finest level changed. A state edited
+        without a change of time is not noticed.
+        """
         if self._key != (k, state.time):
             self._steps = 0
             self._start = state.q[k].copy() if self.interval > 1 else None
@@ -63,9 +69,9 @@ class SelfContact:
         ``ROUNDS`` times. Returns the pairs found, or None when this step does not check.
 
         Known fault: obstacles do not run after it, so a bottom layer pressed onto the
-        ground by the top one ends up to 1.9 mm in it (the folded drop). Running them after
-        each round with the points they moved held fixed that, but the folded drop's
-        largest strain went from 1.35 to 3.06 (129 x 129) and 257 x 257 was refused.
+        ground by the top one ends partly in it (the folded drop). Running them after each
+        round with the points they moved held fixed that, but doubled the folded drop's
+        largest strain (129 x 129) and got 257 x 257 refused (issue 10's note).
         """
         k = levels[-1]
         if not self._due(k, state):

@@ -190,15 +190,11 @@ class Solver:
                 self.strain_refine_iterations if inherited_fixed else self.strain_iterations,
                 self.strain_tolerance, h, self._scratch[k])
             self._extra[f'strain_sweeps_{k}'] = sweeps
-        self._obstacles(k, state, holds, inherited_fixed)
-
-    def _obstacles(self, k, state, holds, inherited_fixed):
-        """Move level k's points out of the scene's obstacles (see kernels.contact)."""
         scene = self.model.scene
         if scene is not None and not scene.empty:
-            if self.kernels(k).contact(self._q[k], self._qd[k], self._dv[k], state.q[k],
-                                       holds.kind, inherited_fixed, scene.planes, scene.boxes,
-                                       scene.spheres, scene.friction, scene.margin):
+            if kit.contact(self._q[k], self._qd[k], self._dv[k], state.q[k], holds.kind,
+                           inherited_fixed, scene.planes, scene.boxes, scene.spheres,
+                           scene.friction, scene.margin):
                 self._touched = True
 
     def step(self, state, control, dt):

@@ -104,7 +104,7 @@ class _Recorder:
         return record
 
 
-def kernel_calls(solvers=None, parallel=None, energy=True, self_contact=True):
+def kernel_calls(solvers=None, parallel=None, energy=True, self_contact=False):
     """``[(dispatcher, signature)]`` a warm-up of this configuration compiles, each once."""
     parallel = numba.get_num_threads() > 1 if parallel is None else parallel
     calls = []
@@ -146,7 +146,7 @@ def _stamp(solvers, parallel, energy, self_contact):
     return os.path.join(kernels.jit.CACHE_DIR, f'warm-{key}')
 
 
-def kernels_cached(solvers=None, parallel=None, energy=True, self_contact=True):
+def kernels_cached(solvers=None, parallel=None, energy=True, self_contact=False):
     """
     Tell whether :func:`warm_up` with these arguments ran on this machine before.
 
@@ -175,17 +175,18 @@ def _compile_in_processes(solvers, parallel, energy, self_contact, processes):
             child.wait()
 
 
-def warm_up(solvers=None, parallel=None, energy=True, self_contact=True, processes=None):
+def warm_up(solvers=None, parallel=None, energy=True, self_contact=False, processes=None):
     """
     Compile (or load from the cache) the kernels a configuration uses; returns seconds.
 
     ``solvers``: names (default: all of :data:`SOLVERS`; the gravity mode is a flag of the
     kernels, so either mode compiles both); ``parallel``: also the parallel builds
     (default: when numba runs more than one thread); ``energy``: the energy kernel
-    (recordings and metrics); ``self_contact``: the self-contact kernel; ``processes``:
+    (recordings and metrics); ``self_contact``: the self-contact kernel (off by default:
+    18.8 s to compile, ``COMPILE_SECONDS``, for a feature that is opt-in); ``processes``:
     how many processes compile on an empty cache (default: the cores, at most 4; 1
-    compiles here only). With the on-disk cache this
-    loads machine code in well under a second.
+    compiles here only). With the on-disk cache this loads machine code in well under a
+    second.
     """
     start = time.perf_counter()
     parallel = numba.get_num_threads() > 1 if parallel is None else parallel
