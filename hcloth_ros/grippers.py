@@ -7,7 +7,7 @@ commands keeps only the newest of each gripper; nothing is queued.
 
 from dataclasses import dataclass
 
-from hcloth_ros.core.control import quaternion_to_matrix
+from hcloth_ros.core.poses import quaternion_to_matrix
 import numpy as np
 
 
@@ -21,6 +21,27 @@ class Gripper:
     pose_pending: bool = False
     close_request: bool = None      # None: nothing new; True: grasp; False: release
     grasping: bool = False
+
+
+def checked_pose(who, frame_id, expected_frame, position, orientation):
+    """
+    Return ``((rotation, translation), None)`` for a pose message's numbers.
+
+    Or ``(None, (severity, why))`` when it must be dropped: ``'warning'`` for a wrong frame
+    (there is no tf here), ``'error'`` for a non-finite position or a zero or non-finite
+    quaternion. ``who`` names the sender in the message.
+    """
+    if frame_id != expected_frame:
+        return None, ('warning', f'{who}: pose in frame {frame_id!r}, expected '
+                                 f'{expected_frame!r} (no tf here): dropped')
+    try:
+        rotation = quaternion_to_matrix(*orientation)
+        translation = np.array(position, dtype=np.float64)
+        if translation.shape != (3,) or not np.all(np.isfinite(translation)):
+            raise ValueError(f'position must be 3 finite numbers, got {translation.tolist()}')
+    except ValueError as e:
+        return None, ('error', f'{who}: bad pose dropped: {e}')
+    return (rotation, translation), None
 
 
 def valid_name(name):
@@ -60,22 +81,15 @@ class GripperBank:
         """
         Take a target pose (``position`` xyz in m, ``orientation`` quaternion xyzw).
 
-        Returns None if taken, else ``(severity, why)`` it was dropped (``'warning'``: a
-        wrong frame; ``'error'``: a non-finite position, a zero or non-finite quaternion);
-        a dropped pose changes nothing.
+        Returns None if taken, else ``(severity, why)`` it was dropped (see
+        :func:`checked_pose`); a dropped pose changes nothing.
         """
-        if frame_id != expected_frame:
-            return 'warning', (f'gripper {name}: pose in frame {frame_id!r}, expected '
-                               f'{expected_frame!r} (no tf here): dropped')
-        try:
-            rotation = quaternion_to_matrix(*orientation)
-            translation = np.array(position, dtype=np.float64)
-            if translation.shape != (3,) or not np.all(np.isfinite(translation)):
-                raise ValueError(f'position must be 3 finite numbers, got {translation.tolist()}')
-        except ValueError as e:
-            return 'error', f'gripper {name}: bad pose dropped: {e}'
+        pose, dropped = checked_pose(f'gripper {name}', frame_id, expected_frame, position,
+                                     orientation)
+        if dropped:
+            return dropped
         g = self.grippers[name]
-        g.rotation, g.translation, g.pose_pending = rotation, translation, True
+        (g.rotation, g.translation), g.pose_pending = pose, True
         return None
 
     def request_close(self, name, closed):

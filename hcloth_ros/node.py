@@ -16,10 +16,19 @@ Grippers (parameter ``grippers``, default ``['left', 'right']``), for each name:
   within ``grasp_radius`` of the gripper (the nearest point if none is that close), which
   then move rigidly with the gripper pose at every level; false releases them.
 
+Moving obstacles (parameter ``scene.moving_obstacles``, see :mod:`~hcloth_ros.obstacles`):
+each follows ``cloth/obstacles/<name>/pose`` (``geometry_msgs/PoseStamped`` in
+``frame_id``, newest pose applied at the next tick) from its first pose on. The scene
+(ground, boxes, spheres, moving obstacles) is published as ``cloth/scene``
+(``visualization_msgs/MarkerArray``, transient local) at start, when it changes and when
+an obstacle moves.
+
 Bad input (non-finite poses, wrong frames, commands before any pose) is logged, throttled,
-and dropped; the simulation goes on. ``cloth/reset`` (``std_srvs/Trigger``) returns the
-cloth to its initial state and releases every grasp. ``pinned_points`` and the solver's
-step parameters may change at runtime; scene and cloth parameters are read-only.
+and dropped; the simulation goes on. A step refused for blow-up is retried in 2, 4 and 8
+smaller steps and the node says so. ``cloth/reset`` (``std_srvs/Trigger``) returns the
+cloth to its initial state and releases every grasp. ``pinned_points``, the static
+obstacles (``scene.*``: a cloth inside a new obstacle is pushed out over a few steps) and
+the solver's step parameters may change at runtime; cloth parameters are read-only.
 
 The node is wiring: the units it wires are ROS-free and tested on their own
 (:mod:`~hcloth_ros.grippers`, :mod:`~hcloth_ros.governor`, :mod:`~hcloth_ros.publishing`,
@@ -35,21 +44,24 @@ from geometry_msgs.msg import PoseStamped
 from hcloth_ros import lifetime, params
 from hcloth_ros.core import kernels_cached, warm_up
 from hcloth_ros.core.control import PINNED
+from hcloth_ros.core.recovery import step_with_retries
 from hcloth_ros.core.solvers import HierarchicalSolver
 from hcloth_ros.governor import finest_to_simulate, Governor
 from hcloth_ros.grippers import GripperBank, points_within
 from hcloth_ros.node_params import (ALL_PARAMS, check_change, descriptor, NODE_PARAMS,
-                                    unknown_overrides)
+                                    scene_after, unknown_overrides)
+from hcloth_ros.obstacles import ObstacleBank
 from hcloth_ros.publishing import ClothPublisher
+from hcloth_ros.scene_markers import scene_markers
 from hcloth_ros.tick_stats import TickStats
 import numba
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.node import Node
-from rclpy.qos import qos_profile_sensor_data, QoSProfile
+from rclpy.qos import DurabilityPolicy, qos_profile_sensor_data, QoSProfile
 from sensor_msgs.msg import PointCloud2
 from std_msgs.msg import Bool
 from std_srvs.srv import Trigger
-from visualization_msgs.msg import Marker
+from visualization_msgs.msg import Marker, MarkerArray
 
 
 __all__ = ['ClothSimNode', 'main', 'NODE_PARAMS']
@@ -70,6 +82,9 @@ class ClothSimNode(Node):
         values = params.resolve({spec.name: self.get_parameter(spec.name).value
                                  for spec in params.PARAMS})
         self.model, self.solver, self.state, self.control = params.build_all(values)
+        self._next_scene = None     # checked, applied once the whole batch is accepted
+        self.obstacles = ObstacleBank(self.get_parameter('scene.moving_obstacles').value,
+                                      self.control.bodies, values['scene.friction'])
         # multi-level solvers simulate levels on demand and publish any level of detail
         self._levelled = isinstance(self.solver, HierarchicalSolver)
         self.initial = self.state.copy()
@@ -89,7 +104,10 @@ class ClothSimNode(Node):
             self.create_publisher(Marker, 'cloth/lod_marker', 10))
         self.create_service(Trigger, 'cloth/reset', self._on_reset)
         self._make_grippers()
+        self._make_obstacles()
         self.recorder = self._make_recorder()
+        if self.recorder is not None:
+            self.recorder.log_scene(self.model.scene, self.control.bodies, self.state.time)
         self.stats = TickStats()
         self.period = 1.0 / self.get_parameter('rate_hz').value
         self.governor = Governor(self.period, self.top_level, floor=self.lod_level,
@@ -110,7 +128,8 @@ class ClothSimNode(Node):
         recording = bool(self.get_parameter('rerun_path').value
                          or self.get_parameter('rerun_url').value)
         wanted = {'solvers': [self.solver.name], 'parallel': threads > 1,
-                  'energy': recording, 'self_contact': self.solver.self_contact is not None}
+                  'energy': recording, 'self_contact': self.solver.self_contact is not None,
+                  'bodies': bool(self.obstacles.names())}
         if not kernels_cached(**wanted):
             self.get_logger().info(
                 f'preparing the numba kernels of the {self.solver.name} solver: the first '
@@ -131,8 +150,9 @@ class ClothSimNode(Node):
                                     '"/": ignored')
         latest = QoSProfile(depth=1)    # a flood keeps only the newest command
         for name in self.grippers.names():
-            self.create_subscription(PoseStamped, f'cloth/grippers/{name}/pose',
-                                     lambda msg, name=name: self._on_pose(name, msg), latest)
+            self.create_subscription(
+                PoseStamped, f'cloth/grippers/{name}/pose',
+                lambda msg, name=name: self._on_pose(self.grippers, name, msg), latest)
             self.create_subscription(
                 Bool, f'cloth/grippers/{name}/close',
                 lambda msg, name=name: self.grippers.request_close(name, msg.data), latest)
@@ -140,6 +160,26 @@ class ClothSimNode(Node):
         self._gripper_prefix = self.resolve_topic_name('cloth/grippers') + '/'
         self._reported_unknown = set()
         self.create_timer(1.0, self._check_unknown_grippers)
+
+    def _make_obstacles(self):
+        latest = QoSProfile(depth=1)    # a flood keeps only the newest pose
+        for name in self.obstacles.names():
+            self.create_subscription(
+                PoseStamped, f'cloth/obstacles/{name}/pose',
+                lambda msg, name=name: self._on_pose(self.obstacles, name, msg), latest)
+        # a late RViz gets the last scene
+        self._scene_publisher = self.create_publisher(
+            MarkerArray, 'cloth/scene',
+            QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL))
+        self._show_scene()
+
+    def _show_scene(self):
+        """Publish the scene markers and, when recording, log the scene."""
+        self._scene_publisher.publish(scene_markers(
+            self.model.scene, self.control.bodies, self.frame_id,
+            self.get_clock().now().to_msg()))
+        if getattr(self, 'recorder', None) is not None:
+            self.recorder.log_scene(self.model.scene, self.control.bodies, self.state.time)
 
     def _make_recorder(self):
         path, url = self.get_parameter('rerun_path').value, self.get_parameter('rerun_url').value
@@ -168,7 +208,16 @@ class ClothSimNode(Node):
             reason = check_change(p.name, p.value, self.model)
             if reason:
                 return SetParametersResult(successful=False, reason=reason)
+        if any(p.name in params.PARAM_BY_NAME and p.name.startswith('scene.') for p in changes):
+            self._next_scene, reason = scene_after({p.name: p.value for p in changes},
+                                                   self._scene_values())
+            if reason:
+                return SetParametersResult(successful=False, reason=reason)
         return SetParametersResult(successful=True)
+
+    def _scene_values(self):
+        return {spec.name: self.get_parameter(spec.name).value for spec in params.PARAMS
+                if spec.name.startswith('scene.')}
 
     def _apply_parameters(self, changes):
         """Apply an accepted batch of runtime changes."""
@@ -183,13 +232,21 @@ class ClothSimNode(Node):
                 self.dt = float(p.value)
             elif p.name == 'solver.substeps':
                 self.substeps = int(p.value)
+            elif p.name == 'solver.contact_rounds':
+                self.solver.contact_rounds = int(p.value)
             elif p.name == 'solver.strain_limit':
                 self.solver.strain_limit = float(p.value) if p.value > 0 else None
+            elif p.name.startswith('scene.') and self._next_scene is not None:
+                self.model.scene, self._next_scene = self._next_scene, None
+                self.get_logger().info('static obstacles changed; a cloth inside them is '
+                                       'pushed out over the next steps')
+                self._show_scene()
 
-    def _on_pose(self, name, msg):
+    def _on_pose(self, bank, name, msg):
+        """Hand a PoseStamped to a gripper or obstacle bank; log why it was dropped, if it was."""
         p, o = msg.pose.position, msg.pose.orientation
-        dropped = self.grippers.set_pose(name, msg.header.frame_id, self.frame_id,
-                                         (p.x, p.y, p.z), (o.x, o.y, o.z, o.w))
+        dropped = bank.set_pose(name, msg.header.frame_id, self.frame_id, (p.x, p.y, p.z),
+                                (o.x, o.y, o.z, o.w))
         if dropped:
             self._log(*dropped)
 
@@ -241,11 +298,15 @@ class ClothSimNode(Node):
         self._set_levels()
         for severity, text in self.grippers.apply(self.control, self.state, self._points_near):
             self._log(severity, text)
+        moved = self.obstacles.apply()
         for _ in range(self.substeps):
-            report = self.solver.step(self.state, self.control, self.dt)
+            report, steps = step_with_retries(self.solver, self.state, self.control, self.dt)
+            if steps != 1:
+                self._report_retry(report, steps)
             if not report.ok:
-                self.get_logger().error(report.reason, throttle_duration_sec=1.0)
                 break
+        if moved:
+            self._show_scene()
         t1 = time.perf_counter()
         finest = self.solver.levels()[-1]
         lod = min(self.lod_level, finest) if self._levelled else finest
@@ -261,6 +322,16 @@ class ClothSimNode(Node):
         self.stats.add(step=t1 - t0, pack=t2 - t1, publish=t3 - t2, record=t4 - t3,
                        tick=t4 - t0, levels=finest + 1, sim_time=self.state.time)
         self._govern(t4 - t0)
+
+    def _report_retry(self, report, steps):
+        """Say what recovery did: n smaller steps went through, or none did."""
+        if steps:
+            self.get_logger().warning(
+                f'step of {self.dt * 1e3:.2f} ms refused (blow-up); retried as {steps} steps '
+                f'of {self.dt * 1e3 / steps:.2f} ms: went through', throttle_duration_sec=1.0)
+        else:
+            self.get_logger().error(f'{report.reason}; retried in 2, 4 and 8 smaller steps, '
+                                    'all refused', throttle_duration_sec=1.0)
 
     def _govern(self, tick_seconds):
         change = self.governor.judge(tick_seconds)

@@ -27,6 +27,10 @@ NODE_PARAMS = [
           'gave the lowest tail latency with subscribers on the same 2 cores', 1, 256),
     Param('grasp_radius', 0.03, 'a closing gripper takes the points this close (m)',
           0.0, 1.0, False),
+    Param('scene.moving_obstacles', [''], 'moving obstacles, one string each: "<name> '
+          '<shape> <sizes> [friction]" with shape box (3 half extents), sphere (radius) or '
+          'capsule (radius, half length along its z), in m; each follows '
+          'cloth/obstacles/<name>/pose; [""] = none'),
     Param('governor', True, 'shed refinement levels while ticks overrun the period '
           '(false: simulate every consumed level, however long a tick takes)',
           read_only=False),
@@ -57,6 +61,21 @@ def check_change(name, value, model):
         if bad:
             return f'pinned_points {bad[:5]} out of range 0..{model.point_count - 1}'
     return None
+
+
+def scene_after(changes, current):
+    """
+    Return ``(scene, None)``: the static scene after a batch of parameter changes.
+
+    Or ``(None, why)`` if it does not make one. ``changes`` and ``current`` map parameter
+    names to values; only ``scene.*`` names of the scene table count.
+    """
+    values = {n: v for n, v in current.items() if n in params.PARAM_BY_NAME}
+    values.update({n: v for n, v in changes.items() if n in params.PARAM_BY_NAME})
+    try:
+        return params.build_scene(params.resolve(values)), None
+    except (ValueError, TypeError) as e:
+        return None, f'scene refused, nothing changed: {e}'
 
 
 def unknown_overrides(given, known):

@@ -48,14 +48,15 @@ PARAMS = [
           -1e4, 1e4),
     Param('cloth.axis_u', [1.0, 0.0, 0.0], 'world direction of the cloth width', -1.0, 1.0),
     Param('cloth.axis_v', [0.0, 1.0, 0.0], 'world direction of the cloth height', -1.0, 1.0),
-    Param('scene.ground', True, 'a ground plane at scene.ground_z'),
-    Param('scene.ground_z', 0.0, 'ground height (m)', -1e4, 1e4),
+    Param('scene.ground', True, 'a ground plane at scene.ground_z', read_only=False),
+    Param('scene.ground_z', 0.0, 'ground height (m)', -1e4, 1e4, False),
     Param('scene.boxes', [0.0], 'axis-aligned boxes, 6 numbers each: centre xyz, half '
-          'extents xyz (m); [0.0] = none', -1e4, 1e4),
+          'extents xyz (m); [0.0] = none', -1e4, 1e4, False),
     Param('scene.spheres', [0.0], 'spheres, 4 numbers each: centre xyz, radius (m); '
-          '[0.0] = none', -1e4, 1e4),
-    Param('scene.friction', 0.5, 'Coulomb friction coefficient with obstacles', 0.0, 10.0),
-    Param('scene.margin', 0.002, 'distance kept from obstacle surfaces (m)', 0.0, 0.1),
+          '[0.0] = none', -1e4, 1e4, False),
+    Param('scene.friction', 0.5, 'Coulomb friction coefficient with obstacles', 0.0, 10.0,
+          False),
+    Param('scene.margin', 0.002, 'distance kept from obstacle surfaces (m)', 0.0, 0.1, False),
     Param('solver.name', 'multigrid', 'multigrid, hierarchical, explicit, approx or implicit'),
     Param('solver.accurate_level', 1, 'multigrid: the finest level solved by BDF2 and '
           'multigrid-CG; finer levels follow eq. 7 (clipped to the finest level)', 0, 9),
@@ -70,6 +71,9 @@ PARAMS = [
           False),
     Param('solver.dt', 1 / 60, 'simulated seconds per step (s)', 1e-6, 0.1, False),
     Param('solver.substeps', 1, 'solver steps per timer tick', 1, 100, False),
+    Param('solver.contact_rounds', 16, 'most rounds of strain limiting (10 sweeps, every '
+          'point free) and contact on the finest level when it touches an obstacle; the '
+          'coarser levels then take its state; 0: none', 0, 1000, False),
     Param('self_contact.thickness', 0.0, 'self-contact: finest points stay this far from '
           "the cloth's own triangles and never cross one (m); 0 switches it off", 0.0, 0.1),
     Param('self_contact.friction', 0.3, 'self-contact: friction coefficient between layers',
@@ -149,12 +153,17 @@ def pin_ids(values):
     return [] if ids == [-1] else ids
 
 
-def build_model(values):
-    scene = make_scene(
+def build_scene(values):
+    """Return the static obstacles of resolved values (ValueError if they make none)."""
+    return make_scene(
         ground_z=float(values['scene.ground_z']) if values['scene.ground'] else None,
         boxes=np.reshape(_list_or_none(values['scene.boxes'], 6) or [], (-1, 6)),
         spheres=np.reshape(_list_or_none(values['scene.spheres'], 4) or [], (-1, 4)),
         friction=float(values['scene.friction']), margin=float(values['scene.margin']))
+
+
+def build_model(values):
+    scene = build_scene(values)
     placement = Placement(tuple(map(float, values['cloth.origin'])),
                           tuple(map(float, values['cloth.axis_u'])),
                           tuple(map(float, values['cloth.axis_v'])))
@@ -188,7 +197,7 @@ def build_solver(model, values):
                        self_contact_iterations=int(values['self_contact.iterations']),
                        self_contact_interval=int(values['self_contact.interval']))
     return make_solver(name, model, external=values['solver.external'], strain_limit=limit,
-                       **options)
+                       contact_rounds=int(values['solver.contact_rounds']), **options)
 
 
 def build_all(values):

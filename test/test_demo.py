@@ -37,12 +37,17 @@ def test_fold_demo_folds_the_cloth_and_leaves_a_recording(tmp_path, monkeypatch)
     # The README's run command: node + scripted client in separate processes over DDS.
     # After the fold the two corners that started at y = -0.5 lie near the far edge
     # (y > 0.3) on the ground, so the cloth is doubled over: its y extent has halved.
+    # The fold measures (demo/fold_metrics.py) are printed, not yet held to issue 10's
+    # targets (none of the top layer below the bottom one, the far edge within 2 cm, the
+    # crease at the middle): measured about 200 points below, 20 cm and 20 cm. Guarded
+    # here: the far edge within 40 cm, the crease within 30 cm of the middle.
     import random
     import sys
 
     from rerun.chunk import RrdReader
 
     from hcloth_ros.demo import run as demo_run
+    from hcloth_ros.demo.fold_metrics import fold_metrics
     monkeypatch.setenv('ROS_DOMAIN_ID', str(random.randint(100, 200)))
     monkeypatch.setenv('AMENT_PREFIX_PATH', sys.prefix)
     out = str(tmp_path / 'fold.rrd')
@@ -61,3 +66,22 @@ def test_fold_demo_folds_the_cloth_and_leaves_a_recording(tmp_path, monkeypatch)
     assert grid[0, 0, 1] > 0.3 and grid[0, -1, 1] > 0.3
     assert grid[0, 0, 2] < 0.05 and grid[0, -1, 2] < 0.05
     assert np.ptp(grid[..., 1]) < 0.7
+    metrics = fold_metrics(*demo_run.finest_grids(out))
+    assert metrics['far_edge_moved'] < 0.4 and metrics['fold_offset'] < 0.3
+
+
+def test_fold_measures_on_a_folded_grid_built_by_hand():
+    """A 33 x 33 cloth folded exactly 4 mm above its far half, then its top sunk 1 cm."""
+    from hcloth_ros.demo.fold_metrics import fold_metrics
+    u, v = np.meshgrid(np.linspace(-0.5, 0.5, 33), np.linspace(-0.5, 0.5, 33))
+    before = np.stack([u, v, np.full_like(u, 0.002)], axis=-1)
+    after = before.copy()
+    after[:16, :, 1] = -before[:16, :, 1]          # the near half mirrored onto the far one
+    after[:16, :, 2] = 0.006
+    metrics = fold_metrics(before, after)
+    assert metrics['top_below'] == 0 and metrics['far_edge_moved'] == 0.0
+    assert metrics['fold_line'] == pytest.approx(0.0) and metrics['fold_offset'] < 1e-12
+    after[:16, :, 2] = -0.004                      # sunk through the bottom layer
+    after[-1, :, 1] += 0.03                         # and the far edge dragged 3 cm
+    sunk = fold_metrics(before, after)
+    assert sunk['top_below'] == 16 * 33 and sunk['far_edge_moved'] == pytest.approx(0.03)

@@ -27,7 +27,8 @@ def test_node_records_meshes_and_metrics(tmp_path):
     rclpy.init(context=context)
     try:
         sim = ClothSimNode(context=context, parameter_overrides=[
-            Parameter('rerun_path', value=path), Parameter('rerun_finest_every', value=5)])
+            Parameter('rerun_path', value=path), Parameter('rerun_finest_every', value=5),
+            Parameter('scene.boxes', value=[0.0, 0.0, 0.3, 0.2, 0.2, 0.3])])
         executor = SingleThreadedExecutor(context=context)
         executor.add_node(sim)
         end = time.monotonic() + 10
@@ -45,9 +46,15 @@ def test_node_records_meshes_and_metrics(tmp_path):
         assert n == ticks and 'Scalars:scalars' in cols
     n, cols = rows['/cloth/lod']
     assert n >= ticks and 'Mesh3D:vertex_positions' in cols
-    n, _ = rows['/cloth/finest']
-    # finest mesh every 5th tick (plus its topology row once)
+    n, cols = rows['/cloth/finest']
+    # finest mesh every 5th tick (plus its topology row once), shaded, coloured both sides
     assert abs(n - (ticks + 4) // 5) <= 1
+    assert {'Mesh3D:vertex_normals', 'Mesh3D:vertex_colors', 'Mesh3D:face_rendering'} <= cols
+    # the scene: the ground and the box, once at start
+    for entity, archetype in (('/scene/ground', 'Boxes3D'), ('/scene/boxes', 'Boxes3D'),
+                              ('/scene/spheres', 'Ellipsoids3D')):
+        n, cols = rows[entity]
+        assert n == 1 and f'{archetype}:half_sizes' in cols
     assert '/cloth/pins' in rows
     # the levels series says 4 levels were simulated at every tick
     levels = [c for c in RrdReader(path).stream() if c.entity_path == '/metrics/levels']

@@ -14,17 +14,17 @@ def test_shares_compile_exactly_the_signatures_the_warm_up_uses():
     Check that the compiling processes compile what the warm-up then only loads.
 
     They use recorded calls; the real warm-up ran once per session (conftest: every
-    solver, both builds with several threads, the energy, self-contact). Every recorded
-    signature must
-    be one the real calls compiled.
+    solver, both builds with several threads, the energy, self-contact, moving bodies).
+    Every recorded signature must be one the real calls compiled.
     """
-    calls = kernel_calls(parallel=numba.get_num_threads() > 1, energy=True, self_contact=True)
+    calls = kernel_calls(parallel=numba.get_num_threads() > 1, energy=True, self_contact=True,
+                         bodies=True)
     names = {d.py_func.__name__ for d, _ in calls}
     assert {'eq7_level', 'strain_limit', 'contact', 'conjugate_gradient', 'energy',
-            'self_contact'} <= names
+            'self_contact', 'body_contact'} <= names
     without = {d.py_func.__name__ for d, _ in kernel_calls(
         parallel=numba.get_num_threads() > 1, energy=True)}
-    assert 'self_contact' not in without
+    assert not {'self_contact', 'body_contact'} & without
     for dispatcher, signature in calls:
         assert signature in dispatcher.overloads, (dispatcher.py_func.__name__, signature)
 

@@ -1,8 +1,8 @@
 """
-What self-contact costs a step, with nothing near and with the cloth lying on itself.
+What contact costs a step: self-contact, and a moving finger on a cloth on the ground.
 
     hcloth_contact_bench [--sizes 129,257] [--steps 60] [--thickness 0.004]
-                         [--intervals 1,4] [--json FILE]
+                         [--intervals 1,4] [--rounds 0,16] [--json FILE]
 
 For each finest size the ``multigrid`` solver (default options, level 0 9 x 9) runs two
 scenes, with self-contact off and on every n-th step for each ``--intervals`` n:
@@ -10,7 +10,12 @@ scenes, with self-contact off and on every n-th step for each ``--intervals`` n:
 * ``swing``: the benchmark's cloth pinned at two corners swings from horizontal: nothing
   of it comes near itself, the cost of checking;
 * ``folded``: the cloth folded in two (2 cm between the layers) falls 10 cm onto the
-  ground, the top layer onto the bottom one: the cost of contact over the whole sheet.
+  ground, the top layer onto the bottom one: the cost of contact over the whole sheet;
+* ``finger``: the cloth lies on the ground and a capsule (radius 1 cm, 40 cm long,
+  friction 0.8) pressed 3 mm into it drags it along x at 0.2 m/s, self-contact off, for
+  each ``--rounds`` value of the solver's ``contact_rounds``: the moving body's kernel
+  (the kernel's time is that of ``body_contact`` on the finest level) and the rounds of
+  strain limiting and contact.
 
 Prints, per scene and setting, the median and p90 over the steps of the self-contact
 kernel's time in a step (its calls summed, 0 on steps without a check), the whole step's
@@ -57,21 +62,21 @@ def folded(q, height, gap=GAP):
     return out
 
 
-def _timed_kernel(solver, level, times):
-    """Wrap the finest level's self-contact kernel to add its time to ``times[-1]``."""
+def _timed_kernel(solver, level, times, kernel='self_contact'):
+    """Wrap one of a level's kernels (by name) to add its time to ``times[-1]``."""
     kit = solver.kernels(level)
-    inner = kit.self_contact
+    inner = getattr(kit, kernel)
+
+    def timed(*args):
+        start = time.perf_counter()
+        result = inner(*args)
+        times[-1] += time.perf_counter() - start
+        return result
 
     class Timed:
 
         def __getattr__(self, name):
-            return getattr(kit, name)
-
-        def self_contact(self, *args):
-            start = time.perf_counter()
-            result = inner(*args)
-            times[-1] += time.perf_counter() - start
-            return result
+            return timed if name == kernel else getattr(kit, name)
 
     solver._kits[level] = Timed()
 
@@ -83,6 +88,11 @@ def scene_setup(n, scene):
         model = build_model(n, levels)
         state = State.at_rest(model)
         return model, state, prepare('swing', model, state).control
+    if scene == 'finger':       # lying on the ground, the margin above it
+        model = build_model(n, levels, scene=make_scene(ground_z=1.5 - 0.002, friction=0.5))
+        control = Control(model)
+        control.bodies.add('finger', 'capsule', [0.01, 0.2], friction=0.8)
+        return model, State.at_rest(model), control
     model = build_model(n, levels, scene=make_scene(ground_z=1.4))
     state = State.at_rest(model)
     for k in range(model.level_count):
@@ -90,18 +100,37 @@ def scene_setup(n, scene):
     return model, state, Control(model)
 
 
-def run(n, scene, steps, thickness, interval):
-    """Time ``steps`` steps of one scene (``interval`` None: self-contact off)."""
+# the finger's axis along y: the body's z turned onto y
+ALONG_Y = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])
+
+
+def _move_finger(control, i):
+    """Place the finger for step i: 3 mm into the cloth at the middle, 0.2 m/s along x."""
+    control.bodies.set_pose('finger', ALONG_Y, (0.2 * i / 60, 0.5, 1.5 + 0.011 - 0.003))
+
+
+def run(n, scene, steps, thickness, interval, rounds=16):
+    """
+    Time ``steps`` steps of one scene.
+
+    ``interval`` None: self-contact off; ``rounds``: the solver's ``contact_rounds``.
+    """
     model, state, control = scene_setup(n, scene)
-    options = {} if interval is None else {'thickness': thickness,
-                                           'self_contact_interval': interval}
+    options = {'contact_rounds': rounds}
+    if interval is not None:
+        options.update(thickness=thickness, self_contact_interval=interval)
     solver = make_solver('multigrid', model, **options)
     finest = model.level_count - 1
+    finger = scene == 'finger'
+    if finger:
+        _move_finger(control, 0)
     solver.step(state, control, 1 / 60)        # compile or load, first allocations
     kernel, totals, pairs, strain, refused = [], [], [0], 0.0, None
-    if interval is not None:
-        _timed_kernel(solver, finest, kernel)
-    for _ in range(steps):
+    if interval is not None or finger:
+        _timed_kernel(solver, finest, kernel, 'body_contact' if finger else 'self_contact')
+    for i in range(steps):
+        if finger:
+            _move_finger(control, i + 1)
         kernel.append(0.0)
         start = time.perf_counter()
         report = solver.step(state, control, 1 / 60)
@@ -112,7 +141,7 @@ def run(n, scene, steps, thickness, interval):
         pairs.append(report.extra.get('self_contact_pairs', 0))
         strain = max(strain, report.max_strain)
     ms = np.array(kernel) * 1e3
-    return {'n': n, 'scene': scene, 'interval': interval,
+    return {'n': n, 'scene': scene, 'interval': interval, 'contact_rounds': rounds,
             'kernel_median_ms': float(np.median(ms)),
             'kernel_p90_ms': float(np.percentile(ms, 90)),
             'step_median_ms': float(np.median(totals) * 1e3), 'pairs_max': int(max(pairs)),
@@ -122,7 +151,10 @@ def run(n, scene, steps, thickness, interval):
 def _line(r):
     setting = 'off' if r['interval'] is None else (
         'every step' if r['interval'] == 1 else f"every {r['interval']}th")
-    kernel = '' if r['interval'] is None else (
+    finger = r['scene'] == 'finger'
+    if finger:
+        setting = f"rounds {r['contact_rounds']}"
+    kernel = '' if r['interval'] is None and not finger else (
         f"kernel median {r['kernel_median_ms']:6.2f} ms, p90 {r['kernel_p90_ms']:6.2f} ms; ")
     return (f"  {r['n']:4d} x {r['n']:<4d} {r['scene']:7s} {setting:11s} {kernel:40s}"
             f"step median {r['step_median_ms']:6.2f} ms, most pairs {r['pairs_max']:5d}, "
@@ -136,9 +168,11 @@ def main(argv=None):
     parser.add_argument('--thickness', type=float, default=0.004)
     parser.add_argument('--intervals', default='1,4',
                         help='self_contact_interval values to run, comma-separated')
+    parser.add_argument('--rounds', default='0,16',
+                        help='contact_rounds values for the finger scene, comma-separated')
     parser.add_argument('--json', help='also write the figures to this file')
     args = parser.parse_args(argv)
-    print(f'self-contact cost: thickness {args.thickness * 1e3:g} mm, multigrid, '
+    print(f'contact cost: self-contact thickness {args.thickness * 1e3:g} mm, multigrid, '
           f'{numba.get_num_threads()} numba thread(s), load average '
           f'{os.getloadavg()[0]:.2f}', flush=True)
     settings = [None] + [int(s) for s in args.intervals.split(',')]
@@ -148,6 +182,9 @@ def main(argv=None):
             for interval in settings:
                 results.append(run(n, scene, args.steps, args.thickness, interval))
                 print(_line(results[-1]), flush=True)
+        for rounds in (int(s) for s in args.rounds.split(',')):
+            results.append(run(n, 'finger', args.steps, args.thickness, None, rounds))
+            print(_line(results[-1]), flush=True)
     print(f'load average after: {os.getloadavg()[0]:.2f}')
     if args.json:
         with open(args.json, 'w') as f:

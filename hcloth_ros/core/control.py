@@ -22,7 +22,9 @@ Pins win over grasps for a point that is both.
 from dataclasses import dataclass
 
 # the hold kinds are the kernels' (re-exported here for the engine's users)
+from hcloth_ros.core.bodies import MovingBodies
 from hcloth_ros.core.kernels.layout import DRIVEN, FREE, PINNED  # noqa: F401
+from hcloth_ros.core.poses import check_rotation, check_vector
 import numpy as np
 
 
@@ -49,41 +51,16 @@ class Holds:
     drive_target: np.ndarray
 
 
-def _check_rotation(rotation):
-    r = np.asarray(rotation, dtype=np.float64)
-    if r.shape != (3, 3) or not np.all(np.isfinite(r)):
-        raise ValueError('rotation must be a finite 3x3 matrix')
-    if np.max(np.abs(r @ r.T - np.eye(3))) > 1e-6 or np.linalg.det(r) < 0:
-        raise ValueError('rotation must be orthonormal with determinant +1')
-    return r
-
-
-def _check_vector(v, what):
-    a = np.asarray(v, dtype=np.float64)
-    if a.shape != (3,) or not np.all(np.isfinite(a)):
-        raise ValueError(f'{what} must be 3 finite numbers, got {v!r}')
-    return a
-
-
-def quaternion_to_matrix(x, y, z, w):
-    """Rotation matrix of a unit quaternion (normalised here; zero length refused)."""
-    q = np.array([x, y, z, w], dtype=np.float64)
-    n = np.linalg.norm(q)
-    if not np.isfinite(n) or n < 1e-9:
-        raise ValueError(f'quaternion must be finite and non-zero, got {q.tolist()}')
-    x, y, z, w = q / n
-    return np.array([
-        [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-        [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-        [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
-    ])
-
-
 class Control:
-    """Pins, grasps and targets of one cloth; create with ``Control(model)``."""
+    """
+    Pins, grasps and targets of one cloth; create with ``Control(model)``.
+
+    ``bodies``: the moving obstacles (:class:`~hcloth_ros.core.bodies.MovingBodies`).
+    """
 
     def __init__(self, model):
         self.model = model
+        self.bodies = MovingBodies()
         self._pins = {}
         self._grasps = {}
         self._version = 0
@@ -136,8 +113,8 @@ class Control:
         arr = self._check_ids(ids)
         if arr.size == 0:
             raise ValueError(f'grasp {name!r} needs at least one point')
-        r = _check_rotation(rotation)
-        p = _check_vector(translation, 'translation')
+        r = check_rotation(rotation)
+        p = check_vector(translation, 'translation')
         grid_index, local = [], []
         for k in range(self.model.level_count):
             reps = np.unique(sorted(set().union(*(self.model.footprint(i, k)
@@ -153,8 +130,8 @@ class Control:
         """Set a grasp frame's pose; its points follow rigidly from the next step."""
         if name not in self._grasps:
             raise KeyError(f'no grasp named {name!r} (have {self.grasp_names})')
-        rotation = _check_rotation(rotation)
-        translation = _check_vector(translation, 'translation')
+        rotation = check_rotation(rotation)
+        translation = check_vector(translation, 'translation')
         g = self._grasps[name]
         g.rotation, g.translation = rotation, translation
 
@@ -185,7 +162,7 @@ class Control:
     # --- kinematic targets ------------------------------------------------------------
     def set_target(self, point_id, position, state):
         """Drive one point to ``position`` (m) from the next step on."""
-        pos = _check_vector(position, 'target position')
+        pos = check_vector(position, 'target position')
         pid = int(self._check_ids([point_id])[0])
         name = ('target', pid)
         if name not in self._grasps:

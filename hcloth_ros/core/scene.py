@@ -11,6 +11,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+# distance kept from obstacle surfaces by default (m): about a cloth's half thickness
+MARGIN = 0.002
+
 
 @dataclass(frozen=True)
 class Scene:
@@ -29,14 +32,14 @@ class Scene:
     boxes: np.ndarray
     spheres: np.ndarray
     friction: float = 0.5
-    margin: float = 0.002
+    margin: float = MARGIN
 
     @property
     def empty(self):
         return len(self.planes) + len(self.boxes) + len(self.spheres) == 0
 
 
-def make_scene(ground_z=None, boxes=(), spheres=(), friction=0.5, margin=0.002):
+def make_scene(ground_z=None, boxes=(), spheres=(), friction=0.5, margin=MARGIN):
     """
     Build a :class:`Scene`, checking every number.
 

@@ -94,9 +94,7 @@ class SelfContact:
         if dropped:
             solver._extra['self_contact_dropped'] = dropped
         if pairs:
-            for fine in range(k, levels[0], -1):
-                for arrays in (solver._q, solver._qd, solver._dv):
-                    kit.inject(arrays[fine], arrays[fine - 1])
+            solver._inject_down(levels)
         return pairs
 
     def committed(self, k, state, checked):

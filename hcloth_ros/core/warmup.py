@@ -36,7 +36,7 @@ COMPILE_SECONDS = {'strain_limit': 7.3, 'strain_limit_parallel': 6.0, 'eq7_level
                    'energy': 1.0, 'multigrid_cg': 13.3, 'assemble_hierarchy': 8.1,
                    'newton_residual': 1.8, 'anchor': 1.8, 'new_positions': 0.4,
                    'start_velocity': 0.3, 'prescribe': 0.3, 'prolong': 0.5, 'inject': 0.1,
-                   'points_by_id_f32': 0.3, 'self_contact': 18.8}
+                   'points_by_id_f32': 0.3, 'self_contact': 18.8, 'body_contact': 6.3}
 
 
 # Options a solver runs with to reach all its kernels: the multigrid solver refines by
@@ -50,12 +50,12 @@ def _tiny_model():
     return ClothBuilder(resolution=(3, 3), level_count=2, scene=scene).finalize()
 
 
-def _exercise(model, solvers, parallel, energy, self_contact=False, builds=None):
+def _exercise(model, solvers, parallel, energy, self_contact=False, bodies=False, builds=None):
     """
     Make every kernel call the configuration makes.
 
-    One step of each solver (and build), with self-contact if asked, the energy, a level
-    restart. ``builds`` maps
+    One step of each solver (and build), with self-contact and a moving body if asked, the
+    energy, a level restart. ``builds`` maps
     ``'serial'`` and ``'parallel'`` to the kernel sets (default :mod:`kernels`' own).
     """
     builds = builds or {'serial': kernels.SERIAL, 'parallel': kernels.PARALLEL}
@@ -68,6 +68,11 @@ def _exercise(model, solvers, parallel, energy, self_contact=False, builds=None)
                 control = Control(model)
                 control.pin([0])
                 control.set_target(2, (1.0, 0.0, 1.0), state)
+                if bodies:      # a sphere round the cloth's middle, moving
+                    control.bodies.add('warm', 'sphere', [0.3])
+                    control.bodies.set_pose('warm', np.eye(3), (0.5, 0.5, 1.0))
+                    control.bodies.commit()
+                    control.bodies.set_pose('warm', np.eye(3), (0.5, 0.5, 1.1))
                 make_solver(name, model, builds=builds[build], **options).step(
                     state, control, 1e-3)
     state = State.at_rest(model)
@@ -88,7 +93,8 @@ class _Recorder:
     Its results are harmless placeholders the solvers accept.
     """
 
-    RESULTS = {'strain_limit': 0, 'strain_stats': (0.0, 0.0, True),
+    RESULTS = {'strain_limit': 0, 'contact': 0, 'body_contact': 0,
+               'strain_stats': (0.0, 0.0, True),
                'conjugate_gradient': (1, 0.0), 'multigrid_cg': (1, 0.0), 'energy': (0.0, 0.0, 0.0),
                'self_contact': (0, 0, 0)}
 
@@ -104,13 +110,13 @@ class _Recorder:
         return record
 
 
-def kernel_calls(solvers=None, parallel=None, energy=True, self_contact=False):
+def kernel_calls(solvers=None, parallel=None, energy=True, self_contact=False, bodies=False):
     """``[(dispatcher, signature)]`` a warm-up of this configuration compiles, each once."""
     parallel = numba.get_num_threads() > 1 if parallel is None else parallel
     calls = []
     sets = {'serial': _Recorder(kernels.SERIAL, calls),
             'parallel': _Recorder(kernels.PARALLEL, calls)}
-    _exercise(_tiny_model(), solvers, parallel, energy, self_contact, builds=sets)
+    _exercise(_tiny_model(), solvers, parallel, energy, self_contact, bodies, builds=sets)
     unique = {}
     for dispatcher, args in calls:
         signature = tuple(numba.typeof(a) for a in args)
@@ -118,13 +124,13 @@ def kernel_calls(solvers=None, parallel=None, energy=True, self_contact=False):
     return list(unique.values())
 
 
-def compile_share(solvers, parallel, energy, self_contact, index, count):
+def compile_share(solvers, parallel, energy, self_contact, bodies, index, count):
     """
     Compile share ``index`` of ``count`` of the configuration's kernels into the cache.
 
     Shares are balanced by :data:`COMPILE_SECONDS`, largest first.
     """
-    calls = sorted(kernel_calls(solvers, parallel, energy, self_contact),
+    calls = sorted(kernel_calls(solvers, parallel, energy, self_contact, bodies),
                    key=lambda c: -COMPILE_SECONDS.get(c[0].py_func.__name__, 1.0))
     load = [0.0] * count
     for dispatcher, signature in calls:
@@ -134,7 +140,7 @@ def compile_share(solvers, parallel, energy, self_contact, index, count):
             dispatcher.compile(signature)
 
 
-def _stamp(solvers, parallel, energy, self_contact):
+def _stamp(solvers, parallel, energy, self_contact, bodies):
     """Return the file that says a configuration's kernels are in the cache (or None)."""
     if kernels.jit.CACHE_DIR is None:
         return None
@@ -142,22 +148,23 @@ def _stamp(solvers, parallel, energy, self_contact):
     names = sorted(SOLVERS if solvers is None else solvers)
     key = '-'.join(names + ['parallel' if parallel else 'serial']
                    + (['energy'] if energy else []) + (['contact'] if self_contact else [])
+                   + (['bodies'] if bodies else [])
                    + [numba.__version__, llvmlite.binding.get_host_cpu_name()])
     return os.path.join(kernels.jit.CACHE_DIR, f'warm-{key}')
 
 
-def kernels_cached(solvers=None, parallel=None, energy=True, self_contact=False):
+def kernels_cached(solvers=None, parallel=None, energy=True, self_contact=False, bodies=False):
     """
     Tell whether :func:`warm_up` with these arguments ran on this machine before.
 
     If so it will load, not compile: under a second instead of tens of seconds.
     """
     parallel = numba.get_num_threads() > 1 if parallel is None else parallel
-    stamp = _stamp(solvers, parallel, energy, self_contact)
+    stamp = _stamp(solvers, parallel, energy, self_contact, bodies)
     return stamp is not None and os.path.exists(stamp)
 
 
-def _compile_in_processes(solvers, parallel, energy, self_contact, processes):
+def _compile_in_processes(solvers, parallel, energy, self_contact, bodies, processes):
     """Shares 1 .. processes-1 in child processes, share 0 here, all into the cache."""
     code = ('import sys; from hcloth_ros.core.warmup import compile_share; '
             'compile_share(*eval(sys.argv[1]))')
@@ -165,17 +172,18 @@ def _compile_in_processes(solvers, parallel, energy, self_contact, processes):
     env = dict(os.environ, PYTHONPATH=os.pathsep.join(
         [package_root] + [p for p in os.environ.get('PYTHONPATH', '').split(os.pathsep) if p]))
     children = [subprocess.Popen([sys.executable, '-c', code,
-                                  repr((solvers, parallel, energy, self_contact, i,
+                                  repr((solvers, parallel, energy, self_contact, bodies, i,
                                         processes))], env=env)
                 for i in range(1, processes)]
     try:
-        compile_share(solvers, parallel, energy, self_contact, 0, processes)
+        compile_share(solvers, parallel, energy, self_contact, bodies, 0, processes)
     finally:
         for child in children:
             child.wait()
 
 
-def warm_up(solvers=None, parallel=None, energy=True, self_contact=False, processes=None):
+def warm_up(solvers=None, parallel=None, energy=True, self_contact=False, bodies=False,
+            processes=None):
     """
     Compile (or load from the cache) the kernels a configuration uses; returns seconds.
 
@@ -183,7 +191,8 @@ def warm_up(solvers=None, parallel=None, energy=True, self_contact=False, proces
     kernels, so either mode compiles both); ``parallel``: also the parallel builds
     (default: when numba runs more than one thread); ``energy``: the energy kernel
     (recordings and metrics); ``self_contact``: the self-contact kernel (off by default:
-    18.8 s to compile, ``COMPILE_SECONDS``, for a feature that is opt-in); ``processes``:
+    18.8 s to compile, ``COMPILE_SECONDS``, for a feature that is opt-in); ``bodies``: the
+    moving bodies' kernel (off by default, 6.3 s); ``processes``:
     how many processes compile on an empty cache (default: the cores, at most 4; 1
     compiles here only). With the on-disk cache this loads machine code in well under a
     second.
@@ -192,10 +201,10 @@ def warm_up(solvers=None, parallel=None, energy=True, self_contact=False, proces
     parallel = numba.get_num_threads() > 1 if parallel is None else parallel
     processes = min(os.cpu_count() or 1, 4) if processes is None else int(processes)
     if processes > 1 and kernels.jit.CACHE_DIR is not None \
-            and not kernels_cached(solvers, parallel, energy, self_contact):
-        _compile_in_processes(solvers, parallel, energy, self_contact, processes)
-    _exercise(_tiny_model(), solvers, parallel, energy, self_contact)
-    stamp = _stamp(solvers, parallel, energy, self_contact)
+            and not kernels_cached(solvers, parallel, energy, self_contact, bodies):
+        _compile_in_processes(solvers, parallel, energy, self_contact, bodies, processes)
+    _exercise(_tiny_model(), solvers, parallel, energy, self_contact, bodies)
+    stamp = _stamp(solvers, parallel, energy, self_contact, bodies)
     if stamp is not None:
         with open(stamp, 'w'):
             pass

@@ -2,8 +2,12 @@
 A stand-in robot that folds the cloth, using only sim_node's public topics.
 
 It waits for ``cloth/points``, finds the two corners nearest the viewer (smallest y, at the
-smallest and largest x), sends grippers ``left`` and ``right`` there, closes them, lifts
-0.25 m, carries the corners over to the far edge, lowers them and lets go, then exits.
+smallest and largest x), sends grippers ``left`` and ``right`` there, closes them, carries
+the corners over the fold line (the middle of the cloth along y) onto the far edge and lets
+go, then exits. The corners travel on a half ellipse round the fold line, as wide as the
+near half is long and ``LIFT`` high, so they are never farther from the fold line than
+the cloth between reaches: carried up and straight over, they pulled the whole cloth
+along (its far edge 1 m).
 """
 
 import sys
@@ -18,20 +22,25 @@ from rclpy.qos import qos_profile_sensor_data
 from sensor_msgs.msg import PointCloud2
 from std_msgs.msg import Bool
 
-LIFT = 0.25
+LIFT = 0.25         # m: the half ellipse's height
+DURATION = 4.0      # s: from the start corner to the far edge
+SHORT = 0.01        # m: the corners stop this short of the far edge
+ABOVE = 0.01        # m: and this far above where they started
 
 
-def waypoints(start, far_y):
-    """(time s, offset from the start corner) of the folding motion, piecewise linear."""
-    over = np.array([0.0, far_y - start[1], 0.0])
-    return [(0.0, np.zeros(3)), (1.0, np.array([0.0, 0.0, LIFT])),
-            (3.0, over + [0.0, 0.0, LIFT]), (4.0, over + [0.0, 0.0, 0.02])]
+def fold_offset(start, far_y, t):
+    """
+    Offset from the start corner at t s into the fold (0 before, the end after).
 
-
-def interpolate(plan, t):
-    times = [p[0] for p in plan]
-    offsets = np.array([p[1] for p in plan])
-    return np.array([np.interp(t, times, offsets[:, d]) for d in range(3)])
+    Half an ellipse round the fold line ``(start y + far_y) / 2``: the angle goes from 0
+    to pi with a smooth start and stop (1 - cos).
+    """
+    half = 0.5 * (far_y - start[1])
+    s = np.clip(t / DURATION, 0.0, 1.0)
+    angle = 0.5 * np.pi * (1.0 - np.cos(np.pi * s))
+    reach = half - SHORT / 2
+    return np.array([0.0, half - reach * np.cos(angle) - (half - reach),
+                     LIFT * np.sin(angle) + ABOVE * s])
 
 
 class FoldClient(Node):
@@ -81,7 +90,7 @@ class FoldClient(Node):
             for pub in self.close_pubs.values():
                 pub.publish(Bool(data=True))
         for name, start in self.starts.items():
-            self._send(name, start + interpolate(waypoints(start, self.far_y), t - 0.5))
+            self._send(name, start + fold_offset(start, self.far_y, t - 0.5))
         if t > 4.7:
             for pub in self.close_pubs.values():
                 pub.publish(Bool(data=False))

@@ -16,7 +16,9 @@ import subprocess
 import sys
 import time
 
+from hcloth_ros.demo.fold_metrics import describe, fold_metrics
 from hcloth_ros.params import config_path
+import numpy as np
 
 
 def sim_node_path():
@@ -52,7 +54,30 @@ def main(argv=None):
     print(f'[demo] recorded {steps} ticks to {args.out}; view it with\n'
           f'    .venv/bin/rerun {args.out}\n'
           f'or in a browser: .venv/bin/rerun --web-viewer --bind 127.0.0.1 {args.out}')
+    print(f'[demo] {describe(fold_metrics(*finest_grids(args.out)))}')
     return 0
+
+
+def finest_grids(path):
+    """
+    Return the first and the last finest mesh of a recording as ``(rows, cols, 3)`` grids.
+
+    The first at the last one's level: the governor may have simulated fewer levels on a
+    busy machine, and a coarser level's points are every other point of the finer one
+    (every level of the fold scene is a square grid).
+    """
+    from rerun.chunk import RrdReader
+    meshes = []
+    for chunk in RrdReader(path).stream():
+        batch = chunk.to_record_batch()
+        if chunk.entity_path == '/cloth/finest' and \
+                'Mesh3D:vertex_positions' in batch.schema.names:
+            meshes += [m for m in batch.column('Mesh3D:vertex_positions').to_pylist() if m]
+    first, last = (np.array(m) for m in (meshes[0], meshes[-1]))
+    side, first_side = (int(round(np.sqrt(len(m)))) for m in (last, first))
+    every = (first_side - 1) // (side - 1)
+    return first.reshape(first_side, first_side, 3)[::every, ::every], \
+        last.reshape(side, side, 3)
 
 
 if __name__ == '__main__':

@@ -47,6 +47,8 @@ strain limiting (Provot 1995)
     ``strain.strain_limit``; ``ref_strain_limit``; ``test_kernel_equivalence::test_strain_*``
 contact with static obstacles
     ``contact.contact``; closed-form geometry; ``test_physics::test_cloth_dropped_on_*``
+contact with moving bodies (boxes, spheres, capsules; friction against their surface velocity)
+    ``bodies.body_contact``; closed-form geometry and Coulomb's law; ``test_bodies``
 self-contact (thickness, crossings during a step, friction between layers)
     ``self_contact.self_contact``; a brute-force check over every point and triangle;
     ``test_self_contact``
@@ -76,6 +78,7 @@ from hcloth_ros.core.kernels.jit import keyed_cache
 with keyed_cache():
     from hcloth_ros.core.kernels.bdf2 import (anchor, new_positions, newton_residual,
                                               start_velocity)
+    from hcloth_ros.core.kernels.bodies import body_contact
     from hcloth_ros.core.kernels.contact import contact
     from hcloth_ros.core.kernels.eq6 import eq6_first_sweep, eq6_second_sweep
     from hcloth_ros.core.kernels.eq7 import (add_prolonged_drift, eq7_level,
@@ -96,7 +99,8 @@ with keyed_cache():
     from hcloth_ros.core.kernels.strain import (excess_threshold, strain_limit,
                                                 strain_limit_parallel)
 
-KERNELS = ('add_prolonged_drift', 'anchor', 'assemble_hierarchy', 'contact', 'conjugate_gradient',
+KERNELS = ('add_prolonged_drift', 'anchor', 'assemble_hierarchy', 'body_contact', 'contact',
+           'conjugate_gradient',
            'energy', 'eq6_first_sweep', 'eq6_second_sweep', 'eq7_level', 'excess_threshold',
            'explicit_step', 'inject', 'multigrid_cg', 'new_positions', 'newton_residual',
            'points_by_id_f32', 'prescribe', 'prolong', 'self_contact', 'spring_forces',
@@ -119,7 +123,8 @@ def builds(rows, cols, threads):
     return PARALLEL if threads > 1 and rows * cols >= PAR_MIN_POINTS else SERIAL
 
 
-__all__ = ['add_prolonged_drift', 'anchor', 'assemble_hierarchy', 'builds', 'chunk_count',
+__all__ = ['add_prolonged_drift', 'anchor', 'assemble_hierarchy', 'body_contact', 'builds',
+           'chunk_count',
            'conjugate_gradient', 'conjugate_gradient_parallel', 'contact', 'DRIVEN', 'energy',
            'eq6_first_sweep', 'eq6_second_sweep', 'eq7_level', 'eq7_level_parallel',
            'excess_threshold', 'explicit_step', 'FREE', 'inject', 'KERNELS', 'multigrid_cg',

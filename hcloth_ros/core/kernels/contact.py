@@ -4,6 +4,13 @@ Contact with static obstacles: ground planes, axis-aligned boxes and spheres.
 A point found inside an obstacle (grown by ``margin``) is moved out along the obstacle's
 normal; its inward normal velocity stops and Coulomb friction slows its tangential
 velocity (never reversing it). See :mod:`hcloth_ros.core.scene` for the obstacle arrays.
+
+A point that was already inside the bare obstacle when the step started (an obstacle set
+where the cloth is, a cloth started inside one) gains ``RECOVERY_SPEED * h`` on its way
+out each step, on top of whatever the step moved it back in (the cloth's weight pulling
+it down, strain limiting), and no more: pushed out at once, a cloth across a box had
+springs stretched to 390 % and kept them for seconds; pulled out at a fixed rate, the
+weight of the draped cloth held points inside for good.
 """
 
 import math
@@ -11,6 +18,8 @@ import math
 from hcloth_ros.core.kernels.jit import JIT
 from hcloth_ros.core.kernels.layout import FREE
 import numba
+
+RECOVERY_SPEED = 1.0     # m/s: how fast a point found inside an obstacle is moved out
 
 
 @numba.njit(**JIT)
@@ -40,25 +49,27 @@ def _box_exit(q, q_prev, r, c, box, margin):
     """
     Return the axis and side (+-1) a point inside ``box`` leaves by (axis -1: outside).
 
+    And whether it was inside the bare box at the start of the step.
+
     The face it entered by: the axis on which its start-of-step position was furthest
-    outside; the nearest face if it was already inside. (The nearest face alone pushes
-    points that fall onto a table top near its edge out sideways, tearing the cloth.)
+    outside the bare box (a point the margin away, where last step's push left it, is
+    outside within rounding). The nearest face alone pushes points that fall onto a table
+    top near its edge out sideways, tearing the cloth. A point already inside the bare box
+    (a box that appeared in the cloth, a cloth started in one) leaves by the top: by the
+    nearest face, the points of a cloth across a box went up, down and sideways, and
+    springs stretched 200-600 % stayed so for seconds.
     """
     axis = -1
     entry = -1e300
     for d in range(3):
         if box[3 + d] + margin - abs(q[d, r, c] - box[d]) <= 0.0:
-            return -1, 0.0
-        outside_before = abs(q_prev[d, r, c] - box[d]) - box[3 + d] - margin
+            return -1, 0.0, False
+        outside_before = abs(q_prev[d, r, c] - box[d]) - box[3 + d]
         if outside_before > entry:
             entry, axis = outside_before, d
     if entry <= 0.0:
-        best = 1e300
-        for d in range(3):
-            pen = box[3 + d] + margin - abs(q[d, r, c] - box[d])
-            if pen < best:
-                best, axis = pen, d
-    return axis, 1.0 if (q_prev[axis, r, c] - box[axis]) >= 0.0 else -1.0
+        return 2, 1.0, True
+    return axis, 1.0 if (q_prev[axis, r, c] - box[axis]) >= 0.0 else -1.0, False
 
 
 @numba.njit(**JIT)
@@ -78,8 +89,8 @@ def contact(
         # inputs: positions at the start of the step (which face a point entered a box
         # by), holds, whether inherited points belong to the coarser level
         q_prev, hold_kind, inherited_fixed,
-        # inputs: the obstacles
-        planes, boxes, spheres, friction, margin):
+        # inputs: the obstacles, the step (s)
+        planes, boxes, spheres, friction, margin, h):
     """
     Push the movable points of a level out of the obstacles.
 
@@ -91,6 +102,7 @@ def contact(
     """
     rows, cols = hold_kind.shape
     x, y, z = q[0], q[1], q[2]
+    recovery = RECOVERY_SPEED * h
     pushes = 0
     for p in range(planes.shape[0]):
         nx, ny, nz, offset = planes[p, 0], planes[p, 1], planes[p, 2], planes[p, 3]
@@ -98,7 +110,12 @@ def contact(
             for c in range(cols):
                 dist = x[r, c] * nx + y[r, c] * ny + z[r, c] * nz - offset - margin
                 if dist < 0.0 and _movable(hold_kind, inherited_fixed, r, c):
-                    _resolve(q, qd, dv, r, c, nx, ny, nz, -dist, friction)
+                    depth = -dist
+                    before = q_prev[0, r, c] * nx + q_prev[1, r, c] * ny + \
+                        q_prev[2, r, c] * nz - offset
+                    if before < 0.0:
+                        depth = min(depth, recovery + max(0.0, before - dist - margin))
+                    _resolve(q, qd, dv, r, c, nx, ny, nz, depth, friction)
                     pushes += 1
     for b in range(boxes.shape[0]):
         box = boxes[b]
@@ -109,9 +126,11 @@ def contact(
                     (abs(z[r, c] - box[2]) < hz)
                 if not (inside and _movable(hold_kind, inherited_fixed, r, c)):
                     continue
-                axis, sign = _box_exit(q, q_prev, r, c, box, margin)
+                axis, sign, started_inside = _box_exit(q, q_prev, r, c, box, margin)
                 if axis >= 0:
                     depth = box[3 + axis] + margin - sign * (q[axis, r, c] - box[axis])
+                    if started_inside:      # leaving by the top (+z)
+                        depth = min(depth, recovery + max(0.0, q_prev[2, r, c] - z[r, c]))
                     _resolve(q, qd, dv, r, c, sign if axis == 0 else 0.0,
                              sign if axis == 1 else 0.0, sign if axis == 2 else 0.0, depth,
                              friction)
@@ -125,6 +144,10 @@ def contact(
                 pen = reach - dist
                 if not (pen > 0.0 and _movable(hold_kind, inherited_fixed, r, c)):
                     continue
+                before = math.sqrt((q_prev[0, r, c] - cx) ** 2 + (q_prev[1, r, c] - cy) ** 2 +
+                                   (q_prev[2, r, c] - cz) ** 2)
+                if before < spheres[s, 3]:
+                    pen = min(pen, recovery + max(0.0, before - dist))
                 if dist > 0.0:
                     _resolve(q, qd, dv, r, c, dx / dist, dy / dist, dz / dist, pen, friction)
                 else:

@@ -1,0 +1,86 @@
+"""
+The node's moving obstacles: declared by ``scene.moving_obstacles``, newest pose per tick.
+
+ROS-free (strings and numbers in, log lines out), tested without a graph. Each obstacle
+is one string ``'<name> <shape> <sizes...> [friction]'``: ``box`` takes three half
+extents, ``sphere`` a radius, ``capsule`` a radius and a half length along its z axis
+(m); a number after the sizes is its friction coefficient (default ``scene.friction``).
+A flood of poses keeps only the newest of each obstacle; nothing is queued.
+"""
+
+from hcloth_ros.core.bodies import MAX_BODIES, SHAPES
+from hcloth_ros.grippers import checked_pose, valid_name
+
+NONE = ['']     # the parameter's "no obstacle" (an empty YAML list has no type)
+
+
+def parse_spec(text, default_friction):
+    """
+    Return ``(name, shape, sizes, friction)`` of one obstacle string.
+
+    ValueError naming the string and what is allowed when it is not one.
+    """
+    words = str(text).split()
+    usage = (f'moving obstacle {text!r}: expected "<name> <shape> <sizes> [friction]" with '
+             'shape box (3 half extents), sphere (radius) or capsule (radius, half length), '
+             'in m')
+    if len(words) < 3 or not valid_name(words[0]) or words[1] not in SHAPES:
+        raise ValueError(usage)
+    name, shape, numbers = words[0], words[1], words[2:]
+    count = SHAPES[shape][1]
+    if len(numbers) not in (count, count + 1):
+        raise ValueError(usage)
+    try:
+        values = [float(w) for w in numbers]
+    except ValueError:
+        raise ValueError(usage) from None
+    friction = values[count] if len(values) > count else float(default_friction)
+    return name, shape, values[:count], friction
+
+
+class ObstacleBank:
+    """
+    The node's moving obstacles, added to ``bodies`` (a control's ``MovingBodies``).
+
+    ``specs``: the parameter's strings (``['']``: none). Raises ValueError before adding
+    anything if one is malformed, repeated or out of range.
+    """
+
+    def __init__(self, specs, bodies, default_friction):
+        parsed = [parse_spec(s, default_friction) for s in specs if str(s).strip()]
+        names = [p[0] for p in parsed]
+        if len(set(names)) != len(names):
+            raise ValueError(f'moving obstacle names repeat: {sorted(names)}')
+        if len(parsed) > MAX_BODIES:
+            raise ValueError(f'at most {MAX_BODIES} moving obstacles, got {len(parsed)}')
+        for name, shape, sizes, friction in parsed:
+            bodies.add(name, shape, sizes, friction)
+        self.bodies = bodies
+        self._pending = {}
+
+    def names(self):
+        return self.bodies.names()
+
+    def __contains__(self, name):
+        return name in self.bodies
+
+    def set_pose(self, name, frame_id, expected_frame, position, orientation):
+        """
+        Keep obstacle ``name``'s newest pose (``position`` xyz, ``orientation`` xyzw).
+
+        Returns None if kept, else ``(severity, why)`` it was dropped (see
+        :func:`~hcloth_ros.grippers.checked_pose`); a dropped pose changes nothing.
+        """
+        pose, dropped = checked_pose(f'obstacle {name}', frame_id, expected_frame, position,
+                                     orientation)
+        if dropped:
+            return dropped
+        self._pending[name] = pose
+        return None
+
+    def apply(self):
+        """Place every obstacle with a new pose for the next step; returns whether any moved."""
+        pending, self._pending = self._pending, {}
+        for name, (rotation, translation) in pending.items():
+            self.bodies.set_pose(name, rotation, translation)
+        return bool(pending)

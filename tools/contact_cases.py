@@ -1,0 +1,88 @@
+"""
+The contact cases the README's limits quote, each printed as a few figures.
+
+    .venv/bin/python tools/contact_cases.py inside [--solver multigrid]
+    .venv/bin/python tools/contact_cases.py ball [--solver multigrid]
+    .venv/bin/python tools/contact_cases.py finger [--solver multigrid]
+
+``inside``: a 1 m cloth started across a box (169 of its 1089 finest points inside): when
+the last point leaves, and the largest strain over the first and the second second.
+``ball``: a 0.1 m ball rising at 1 m/s under a falling 1 m cloth: the largest strain and
+the refused steps. ``finger``: a capsule pressing a 0.4 m cloth onto the ground and
+moving 0.2 m/s along x for 50 steps: how far the points it presses and the whole cloth
+moved, and the largest strain. All at dt = 1/60 s, 3 levels (33 x 33 finest).
+"""
+
+import argparse
+
+from hcloth_ros.core import ClothBuilder, Control, make_scene, make_solver, Placement, State
+from hcloth_ros.core.recovery import step_with_retries
+import numpy as np
+
+DT = 1 / 60
+
+
+def _model(size, origin, scene=None):
+    return ClothBuilder(resolution=(9, 9), level_count=3, width=size, height=size, scene=scene,
+                        placement=Placement(origin, (1, 0, 0), (0, 1, 0))).finalize()
+
+
+def inside(solver_name):
+    box = np.array([0.0, 0.0, 0.5, 0.2, 0.2, 0.1])
+    model = _model(1.0, (-0.5, -0.5, 0.5), make_scene(ground_z=0.0, boxes=[box]))
+    state, control = State.at_rest(model), Control(model)
+    solver = make_solver(solver_name, model)
+    out, strain = None, [0.0, 0.0]
+    for i in range(120):
+        report, _ = step_with_retries(solver, state, control, DT)
+        points = state.points(2)
+        if out is None and not np.all(np.abs(points - box[:3]) < box[3:], axis=1).any():
+            out = (i + 1) * DT
+        strain[i // 60] = max(strain[i // 60], report.max_strain)
+    print(f'{solver_name}: out after {out} s; largest strain {strain[0]:.2f} in the first '
+          f'second, {strain[1]:.2f} in the second')
+
+
+def ball(solver_name):
+    model = _model(1.0, (-0.5, -0.5, 0.4))
+    state, control = State.at_rest(model), Control(model)
+    solver = make_solver(solver_name, model)
+    control.bodies.add('ball', 'sphere', [0.1], friction=0.5)
+    worst, refused = 0.0, 0
+    for i in range(60):
+        control.bodies.set_pose('ball', np.eye(3), (0.0, 0.0, (i + 1) * DT))
+        report = solver.step(state, control, DT)
+        refused += not report.ok
+        worst = max(worst, report.max_strain)
+    print(f'{solver_name}: largest strain {worst:.2f}, {refused} of 60 steps refused')
+
+
+def finger(solver_name):
+    model = _model(0.4, (-0.2, -0.2, 0.002), make_scene(ground_z=0.0))
+    state, control = State.at_rest(model), Control(model)
+    solver = make_solver(solver_name, model)
+    along_y = np.array([[1.0, 0, 0], [0, 0, -1], [0, 1, 0]])     # the capsule's axis on y
+    control.bodies.add('finger', 'capsule', [0.01, 0.03], friction=0.8)
+    x, worst = 0.0, 0.0
+    start = state.points(2)
+    pressed = (np.abs(start[:, 0]) < 0.005) & (np.abs(start[:, 1]) < 0.03)
+    for i in range(60):
+        x += 0.2 * DT if i >= 10 else 0.0
+        control.bodies.set_pose('finger', along_y, (x, 0.0, 0.009))      # 3 mm into the cloth
+        worst = max(worst, solver.step(state, control, DT).max_strain)
+    moved = state.points(2)[:, 0] - start[:, 0]
+    print(f'{solver_name}: finger moved {x:.3f} m, the points it pressed first '
+          f'{moved[pressed].mean():.3f} m, the whole cloth {moved.mean():.3f} m; largest '
+          f'strain {worst:.2f}')
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
+    parser.add_argument('case', choices=('inside', 'ball', 'finger'))
+    parser.add_argument('--solver', default='multigrid')
+    args = parser.parse_args(argv)
+    {'inside': inside, 'ball': ball, 'finger': finger}[args.case](args.solver)
+
+
+if __name__ == '__main__':
+    main()
