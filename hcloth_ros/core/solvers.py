@@ -231,7 +231,10 @@ class Solver:
                                    scene.spheres, scene.friction, scene.margin, self._dt) > 0
         self._touched |= touched
         if touched and wrap:
-            self._wrap(k, state, holds, h, limit, scene, integrated)
+            if self.self_contact is None:
+                self._wrap(k, state, holds, h, limit, scene, integrated)
+            else:       # after self-contact (see step)
+                self._deferred = (k, holds, h, limit, scene, integrated)
 
     def _wrap(self, k, state, holds, h, limit, scene, integrated):
         """
@@ -266,6 +269,7 @@ class Solver:
         if done:
             self._pbd_velocity(k, state, integrated, h)
             self._inject = True
+        return done
 
     def _pbd_velocity(self, k, state, integrated, h):
         """
@@ -310,6 +314,7 @@ class Solver:
         self._bodies, self._dt = control.bodies.packed(), h
         self._finest_now = levels[-1]
         self._inject = False       # whether a body moved points a coarser level shares
+        self._deferred = None      # the finest level's rounds, when self-contact runs first
         for k in levels:
             holds = control.holds(k)
             self._prescribe(k, state, holds, h)
@@ -321,6 +326,13 @@ class Solver:
             checked = self.self_contact.apply(self, levels, state, control.holds(levels[-1]), h)
             if checked is not None:
                 self._extra['self_contact_pairs'] = checked
+            if self._deferred is not None:
+                k, holds, h_post, limit, scene, integrated = self._deferred
+                self._deferred = None
+                if self._wrap(k, state, holds, h_post, limit, scene, integrated):
+                    # the rounds moved points: self-contact has the last word again
+                    self.self_contact.apply(self, levels, state, holds, h)
+                    self._inject_down(levels)
         report = self._check(levels)
         if report.ok:
             # the new state goes in by swapping arrays (no copy): State.q[k] and
