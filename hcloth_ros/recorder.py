@@ -46,7 +46,9 @@ def _blueprint():
                          rrb.TimePanel(timeline='sim_time'), collapse_panels=True)
 
 
-GROUND = 10.0      # m: a plane is drawn as a square this wide
+GROUND_SCALE = 3.0     # a plane is drawn as a square this many cloth sizes wide ...
+GROUND_DROP = 0.005    # m: ... this far below its surface: 2 mm above it (the margin), a
+# cloth lying on it was hidden by the viewer's depth precision
 GROUND_COLOUR = 0x6E8C6EFF
 STATIC_COLOUR = 0x9A9AA6FF
 MOVING_COLOUR = 0xF08C28E6
@@ -118,10 +120,13 @@ class Recorder:
         planes = [] if scene is None else scene.planes
         boxes = np.zeros((0, 6)) if scene is None else scene.boxes
         spheres = np.zeros((0, 4)) if scene is None else scene.spheres
-        # a plane: a thin square GROUND wide under its point nearest the origin
+        # a plane: a thin square under where the cloth started, its top GROUND_DROP below
+        middle = self.model.rest_positions(0).reshape(3, -1).mean(axis=1)
+        half = GROUND_SCALE * max(self.model.width, self.model.height) / 2
         self.rec.log('scene/ground', rr.Boxes3D(
-            centers=[p[:3] * (p[3] - 0.0005) for p in planes],
-            half_sizes=[(GROUND / 2, GROUND / 2, 0.0005)] * len(planes),
+            centers=[middle - (middle @ p[:3] - p[3] + GROUND_DROP + 0.0005) * p[:3]
+                     for p in planes],
+            half_sizes=[(half, half, 0.0005)] * len(planes),
             quaternions=[_quaternion_from_z(p[:3]) for p in planes], colors=GROUND_COLOUR,
             fill_mode='solid'))
         self.rec.log('scene/boxes', rr.Boxes3D(centers=boxes[:, :3], half_sizes=boxes[:, 3:],
