@@ -270,6 +270,7 @@ class ClothSimNode(Node):
     def _on_reset(self, request, response):
         self.state.assign(self.initial)
         self.control.release_all()
+        self.control.bodies.commit()    # obstacles stay where they are, at rest
         self.grippers.forget_grasps()
         response.success = True
         response.message = 'cloth reset to its initial state, every grasp released'

@@ -8,10 +8,14 @@ extents, ``sphere`` a radius, ``capsule`` a radius and a half length along its z
 A flood of poses keeps only the newest of each obstacle; nothing is queued.
 """
 
+import re
+
 from hcloth_ros.core.bodies import MAX_BODIES, SHAPES
-from hcloth_ros.grippers import checked_pose, valid_name
+from hcloth_ros.grippers import checked_pose
 
 NONE = ['']     # the parameter's "no obstacle" (an empty YAML list has no type)
+# a name must make a valid topic token: cloth/obstacles/<name>/pose
+NAME = re.compile(r'[A-Za-z][A-Za-z0-9_]*$')
 
 
 def parse_spec(text, default_friction):
@@ -22,9 +26,10 @@ def parse_spec(text, default_friction):
     """
     words = str(text).split()
     usage = (f'moving obstacle {text!r}: expected "<name> <shape> <sizes> [friction]" with '
-             'shape box (3 half extents), sphere (radius) or capsule (radius, half length), '
-             'in m')
-    if len(words) < 3 or not valid_name(words[0]) or words[1] not in SHAPES:
+             'a name of letters, digits and _ starting with a letter, shape box (3 half '
+             'extents), sphere (radius) or capsule (radius, half length), sizes in m and '
+             'positive, friction in [0, 10]')
+    if len(words) < 3 or not NAME.match(words[0]) or words[1] not in SHAPES:
         raise ValueError(usage)
     name, shape, numbers = words[0], words[1], words[2:]
     count = SHAPES[shape][1]
@@ -35,6 +40,8 @@ def parse_spec(text, default_friction):
     except ValueError:
         raise ValueError(usage) from None
     friction = values[count] if len(values) > count else float(default_friction)
+    if not all(0 < v < float('inf') for v in values[:count]) or not 0 <= friction <= 10:
+        raise ValueError(usage)
     return name, shape, values[:count], friction
 
 

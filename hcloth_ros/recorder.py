@@ -114,7 +114,8 @@ class Recorder:
         Log the static obstacles (``scene``, or None) and the placed moving ``bodies``.
 
         At ``sim_time`` (s) on the timeline (not static: it changes). The node calls it at
-        start, when the scene changes and when an obstacle moves.
+        start, when the scene changes and when an obstacle moves; each call logs all of it
+        (a few rows, against the meshes' thousands).
         """
         self.rec.set_time('sim_time', duration=sim_time)
         planes = [] if scene is None else scene.planes

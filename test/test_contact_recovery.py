@@ -42,7 +42,7 @@ def test_a_cloth_folding_over_a_table_edge_keeps_the_strain_limit():
 
 @pytest.mark.parametrize('solver', ['multigrid', 'hierarchical'])
 def test_a_cloth_started_across_a_box_leaves_it_within_a_second(solver):
-    """169 of 1089 finest points start inside; none is after 1 s (0.1 s measured)."""
+    """169 of 1089 finest points start inside; none is after 1 s (one step measured)."""
     box = np.array([0.0, 0.0, 0.5, 0.2, 0.2, 0.1])
     model = ClothBuilder(resolution=(9, 9), level_count=3,
                          scene=make_scene(ground_z=0.0, boxes=[box]),

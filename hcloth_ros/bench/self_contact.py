@@ -12,7 +12,7 @@ scenes, with self-contact off and on every n-th step for each ``--intervals`` n:
 * ``folded``: the cloth folded in two (2 cm between the layers) falls 10 cm onto the
   ground, the top layer onto the bottom one: the cost of contact over the whole sheet;
 * ``finger``: the cloth lies on the ground and a capsule (radius 1 cm, 40 cm long,
-  friction 0.8) pressed 3 mm into it drags it along x at 0.2 m/s, self-contact off, for
+  friction 0.8) reaching 2 mm below it drags it along x at 0.2 m/s, self-contact off, for
   each ``--rounds`` value of the solver's ``contact_rounds``: the moving body's kernel
   (the kernel's time is that of ``body_contact`` on the finest level) and the rounds of
   strain limiting and contact.
@@ -105,7 +105,7 @@ ALONG_Y = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])
 
 
 def _move_finger(control, i):
-    """Place the finger for step i: 3 mm into the cloth at the middle, 0.2 m/s along x."""
+    """Place the finger for step i: 2 mm below the cloth at its middle, 0.2 m/s along x."""
     control.bodies.set_pose('finger', ALONG_Y, (0.2 * i / 60, 0.5, 1.5 + 0.011 - 0.003))
 
 

@@ -3,8 +3,9 @@ Recovery from a refused step: the same time span again in smaller steps.
 
 A step is refused when it would write a non-finite state or stretch a spring beyond
 ``blowup_strain`` (:class:`~hcloth_ros.core.solvers.Solver`); the state keeps its last good
-value. A fast grasp, a body that jumps, or an obstacle that appears inside the cloth can do
-that at the node's step and not at half or a quarter of it.
+value. Stiffness the step is too long for can do that at the node's step and not at half or
+a quarter of it. A grasp or a body that jumps is not helped: held points and bodies reach
+their poses in the first of the smaller steps (nothing is interpolated).
 """
 
 SPLITS = (2, 4, 8)

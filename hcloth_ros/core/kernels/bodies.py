@@ -290,7 +290,11 @@ def _respond(q, qd, dv, q_prev, r, c, b, h, dt, planes, plane_friction, margin,
         return False
     pressed, px, py, pz = _pressed(q, r, c, b, planes, margin, lx, ly, lz)
     if pressed > 0.0:
-        carried = _carried(b, lx, ly, lz)
+        # the body's motion along the plane only: a body rising off a point it pressed
+        # does not lift it (the point lies under it)
+        cx, cy, cz = _carried(b, lx, ly, lz)
+        along = cx * px + cy * py + cz * pz
+        carried = (cx - along * px, cy - along * py, cz - along * pz)
         if b[FRICTION] > plane_friction:
             _rub(q, qd, dv, q_prev, r, c, (px, py, pz), carried, math.inf, dt)
         elif plane_friction > 0.0:
@@ -341,6 +345,20 @@ def _first_inside(b, margin, sx, sy, sz, lx, ly, lz):
 
 
 @numba.njit(**JIT)
+def _far(lx, ly, lz, sx, sy, sz, reach):
+    """
+    Whether the path from s to l (relative to the body) stays beyond ``reach`` of its origin.
+
+    Relative, not in the world: a body that jumps past a point standing still crosses it.
+    """
+    dx, dy, dz = lx - sx, ly - sy, lz - sz
+    length2 = dx * dx + dy * dy + dz * dz
+    f = 0.0 if length2 == 0.0 else min(1.0, max(0.0, -(sx * dx + sy * dy + sz * dz) / length2))
+    cx, cy, cz = sx + f * dx, sy + f * dy, sz + f * dz
+    return cx * cx + cy * cy + cz * cz >= reach * reach
+
+
+@numba.njit(**JIT)
 def body_contact(
         # inputs / outputs: the level after the step and its velocity change, corrected
         q, qd, dv,
@@ -359,8 +377,8 @@ def body_contact(
     Held points and, with ``inherited_fixed``, inherited points stay where they are.
     A point whose path relative to a body crossed it during the step (ends outside, but
     was inside on the way) is put back where it first was inside, then pushed out as if
-    it had stopped there. Points beyond a body's reach at both ends of the step are
-    skipped before any transform. Returns how many pushes it made.
+    it had stopped there. Points whose path relative to a body stays beyond its reach are
+    skipped. Returns how many pushes it made.
     """
     rows, cols = hold_kind.shape
     pushes = 0
@@ -369,18 +387,13 @@ def body_contact(
         reach = _reach(b) + margin
         for r in range(rows):
             for c in range(cols):
-                x, y, z = q[0, r, c], q[1, r, c], q[2, r, c]
-                px, py, pz = q_prev[0, r, c], q_prev[1, r, c], q_prev[2, r, c]
-                if (x - b[T_END]) ** 2 + (y - b[T_END + 1]) ** 2 + \
-                        (z - b[T_END + 2]) ** 2 >= reach * reach and \
-                        (px - b[T_START]) ** 2 + (py - b[T_START + 1]) ** 2 + \
-                        (pz - b[T_START + 2]) ** 2 >= reach * reach and \
-                        (x - px) ** 2 + (y - py) ** 2 + (z - pz) ** 2 < reach * reach:
-                    continue    # far at both ends, and too short a path to cross it
                 if not _movable(hold_kind, inherited_fixed, r, c):
                     continue
-                lx, ly, lz = _to_local(b, R_END, T_END, x, y, z)
-                sx, sy, sz = _to_local(b, R_START, T_START, px, py, pz)
+                lx, ly, lz = _to_local(b, R_END, T_END, q[0, r, c], q[1, r, c], q[2, r, c])
+                sx, sy, sz = _to_local(b, R_START, T_START, q_prev[0, r, c],
+                                       q_prev[1, r, c], q_prev[2, r, c])
+                if _far(lx, ly, lz, sx, sy, sz, reach):
+                    continue
                 if not _inside(b, margin, lx, ly, lz):
                     f = _first_inside(b, margin, sx, sy, sz, lx, ly, lz)
                     if f < 0.0:

@@ -7,10 +7,11 @@ velocity (never reversing it). See :mod:`hcloth_ros.core.scene` for the obstacle
 
 A point that was already inside the bare obstacle when the step started (an obstacle set
 where the cloth is, a cloth started inside one) gains ``RECOVERY_SPEED * h`` on its way
-out each step, on top of whatever the step moved it back in (the cloth's weight pulling
-it down, strain limiting), and no more: pushed out at once, a cloth across a box had
-springs stretched to 390 % and kept them for seconds; pulled out at a fixed rate, the
-weight of the draped cloth held points inside for good.
+out each call, on top of whatever the step moved it back in (the cloth's weight pulling
+it down, strain limiting), and no more (a solver calling contact several times a step,
+as its rounds on the finest level do, moves it out that much faster): pushed out at once,
+a cloth across a box had springs stretched to 390 % and kept them for seconds; pulled out
+at a fixed rate, the weight of the draped cloth held points inside for good.
 """
 
 import math
