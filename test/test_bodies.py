@@ -79,6 +79,13 @@ def test_points_inside_a_body_end_on_its_grown_surface(shape, size):
     assert np.all(after[inside] >= MARGIN - 1e-12)
     if shape != 'box':      # the nearest surface point: exactly the margin away
         assert np.allclose(after[inside], MARGIN, atol=1e-12)
+    # moved along the normal only: where the signed distance grows fastest
+    eps = 1e-7
+    moved = after_points[inside] - points[inside]
+    direction = moved / np.linalg.norm(moved, axis=1, keepdims=True)
+    grown = _outside_distance(after_points[inside] + eps * direction, shape, size, rotation,
+                              translation) - after[inside]
+    assert np.allclose(grown / eps, 1.0, atol=1e-4)
     assert np.abs(qd).max() < 1e-12     # at rest: no velocity given
 
 
