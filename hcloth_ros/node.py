@@ -107,7 +107,8 @@ class ClothSimNode(Node):
         self._make_obstacles()
         self.recorder = self._make_recorder()
         if self.recorder is not None:
-            self.recorder.log_scene(self.model.scene, self.control.bodies, self.state.time)
+            self.recorder.log_obstacles(self.model.scene, self.state.time)
+            self.recorder.log_bodies(self.control.bodies, self.state.time)
         self.stats = TickStats()
         self.period = 1.0 / self.get_parameter('rate_hz').value
         self.governor = Governor(self.period, self.top_level, floor=self.lod_level,
@@ -171,15 +172,24 @@ class ClothSimNode(Node):
         self._scene_publisher = self.create_publisher(
             MarkerArray, 'cloth/scene',
             QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL))
-        self._show_scene()
+        self._show_scene('obstacles')     # the recorder, made later, logs it all at start
 
-    def _show_scene(self):
-        """Publish the scene markers and, when recording, log the scene."""
+    def _show_scene(self, changed):
+        """
+        Publish the scene markers; when recording, log what ``changed``.
+
+        ``'obstacles'`` (the static ones) or ``'bodies'`` (a moving one moved). The markers
+        always hold the whole scene: the topic keeps only its last message for late viewers.
+        """
         self._scene_publisher.publish(scene_markers(
             self.model.scene, self.control.bodies, self.frame_id,
             self.get_clock().now().to_msg()))
-        if getattr(self, 'recorder', None) is not None:
-            self.recorder.log_scene(self.model.scene, self.control.bodies, self.state.time)
+        if getattr(self, 'recorder', None) is None:
+            return
+        if changed == 'obstacles':
+            self.recorder.log_obstacles(self.model.scene, self.state.time)
+        else:
+            self.recorder.log_bodies(self.control.bodies, self.state.time)
 
     def _make_recorder(self):
         path, url = self.get_parameter('rerun_path').value, self.get_parameter('rerun_url').value
@@ -240,7 +250,7 @@ class ClothSimNode(Node):
                 self.model.scene, self._next_scene = self._next_scene, None
                 self.get_logger().info('static obstacles changed; a cloth inside them is '
                                        'pushed out over the next steps')
-                self._show_scene()
+                self._show_scene('obstacles')
 
     def _on_pose(self, bank, name, msg):
         """Hand a PoseStamped to a gripper or obstacle bank; log why it was dropped, if it was."""
@@ -307,7 +317,7 @@ class ClothSimNode(Node):
             if not report.ok:
                 break
         if moved:
-            self._show_scene()
+            self._show_scene('bodies')
         t1 = time.perf_counter()
         finest = self.solver.levels()[-1]
         lod = min(self.lod_level, finest) if self._levelled else finest

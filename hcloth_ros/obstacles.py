@@ -13,7 +13,6 @@ import re
 from hcloth_ros.core.bodies import MAX_BODIES, SHAPES
 from hcloth_ros.grippers import checked_pose
 
-NONE = ['']     # the parameter's "no obstacle" (an empty YAML list has no type)
 # a name must make a valid topic token: cloth/obstacles/<name>/pose
 NAME = re.compile(r'[A-Za-z][A-Za-z0-9_]*$')
 

@@ -109,13 +109,12 @@ class Recorder:
             fields['vertex_normals'] = grid_normals(q)
         self.rec.log(entity, rr.Mesh3D.from_fields(**fields))
 
-    def log_scene(self, scene, bodies, sim_time):
+    def log_obstacles(self, scene, sim_time):
         """
-        Log the static obstacles (``scene``, or None) and the placed moving ``bodies``.
+        Log the static obstacles (``scene``, or None) at ``sim_time`` (s).
 
-        At ``sim_time`` (s) on the timeline (not static: it changes). The node calls it at
-        start, when the scene changes and when an obstacle moves; each call logs all of it
-        (a few rows, against the meshes' thousands).
+        On the timeline, not static: ``scene.*`` parameters change at runtime. The node
+        calls it at start and when the scene changes.
         """
         self.rec.set_time('sim_time', duration=sim_time)
         planes = [] if scene is None else scene.planes
@@ -135,6 +134,10 @@ class Recorder:
         self.rec.log('scene/spheres', rr.Ellipsoids3D(
             centers=spheres[:, :3], half_sizes=np.repeat(spheres[:, 3:], 3, axis=1),
             colors=STATIC_COLOUR, fill_mode='solid'))
+
+    def log_bodies(self, bodies, sim_time):
+        """Log the placed moving ``bodies`` at ``sim_time`` (s): at start and when one moves."""
+        self.rec.set_time('sim_time', duration=sim_time)
         placed = {'box': [], 'sphere': [], 'capsule': []}
         for name in bodies.names():
             if bodies.pose(name) is not None:

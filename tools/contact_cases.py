@@ -15,6 +15,7 @@ moved, and the largest strain. All at dt = 1/60 s, 3 levels (33 x 33 finest).
 
 import argparse
 
+from hcloth_ros.bench.self_contact import ALONG_Y     # the capsule's axis on y
 from hcloth_ros.core import ClothBuilder, Control, make_scene, make_solver, Placement, State
 from hcloth_ros.core.recovery import step_with_retries
 import numpy as np
@@ -61,14 +62,13 @@ def finger(solver_name):
     model = _model(0.4, (-0.2, -0.2, 0.002), make_scene(ground_z=0.0))
     state, control = State.at_rest(model), Control(model)
     solver = make_solver(solver_name, model)
-    along_y = np.array([[1.0, 0, 0], [0, 0, -1], [0, 1, 0]])     # the capsule's axis on y
     control.bodies.add('finger', 'capsule', [0.01, 0.03], friction=0.8)
     x, worst = 0.0, 0.0
     start = state.points(2)
     pressed = (np.abs(start[:, 0]) < 0.005) & (np.abs(start[:, 1]) < 0.03)
     for i in range(60):
         x += 0.2 * DT if i >= 10 else 0.0
-        control.bodies.set_pose('finger', along_y, (x, 0.0, 0.009))      # 3 mm into the cloth
+        control.bodies.set_pose('finger', ALONG_Y, (x, 0.0, 0.009))      # 3 mm into the cloth
         worst = max(worst, solver.step(state, control, DT).max_strain)
     moved = state.points(2)[:, 0] - start[:, 0]
     print(f'{solver_name}: finger moved {x:.3f} m, the points it pressed first '

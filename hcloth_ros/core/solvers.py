@@ -142,6 +142,7 @@ class Solver:
         self._presc = [np.zeros(s) for s in shapes]
         self._scratch = [np.zeros(s) for s in shapes]
         self._a = [np.zeros(s) for s in shapes]
+        self._integrated = [np.zeros(s) for s in shapes]
         self._dinv = {}
         self._touched = False
         self._bodies, self._dt = np.zeros((0, 0)), 0.0     # set by each step
@@ -206,7 +207,10 @@ class Solver:
         scene = self.model.scene
         wrap = limit is not None and k == self._finest_now and self.contact_rounds and (
             len(self._bodies) or (scene is not None and not scene.empty))
-        integrated = self._q[k].copy() if wrap else None
+        integrated = None
+        if wrap:    # the level as integrated, to tell which points post-processing moved
+            integrated = self._integrated[k]
+            np.copyto(integrated, self._q[k])
         if limit is not None:
             sweeps = kit.strain_limit(
                 self._q[k], self._qd[k], self._dv[k], lv.rest, holds.kind, inherited_fixed,
