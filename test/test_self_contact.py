@@ -176,7 +176,8 @@ def _run_kernel(lv, start, end, qd, friction):
     """Run the kernel on ``end`` in place; return its velocity changes and its result."""
     dv = np.zeros_like(end)
     result = kernels.self_contact(end, qd, dv, start, lv.mass,
-                                  np.zeros(lv.shape, dtype=np.int8), THICKNESS, friction, 4, H)
+                                  np.zeros(lv.shape, dtype=np.int8),
+                                  np.ones(lv.shape, dtype=np.bool_), THICKNESS, friction, 4, H)
     return dv, result
 
 
@@ -235,7 +236,8 @@ def test_kernel_leaves_a_sheet_with_nothing_near_bit_for_bit():
     lv = model.level(3)
     qd, dv = np.zeros_like(end), np.zeros_like(end)
     pairs, _, _ = kernels.self_contact(end, qd, dv, start, lv.mass,
-                                       np.zeros(lv.shape, dtype=np.int8), THICKNESS, 0.3, 4, H)
+                                       np.zeros(lv.shape, dtype=np.int8),
+                                       np.ones(lv.shape, dtype=np.bool_), THICKNESS, 0.3, 4, H)
     assert pairs == 0
     assert np.array_equal(end, before) and not qd.any()
 

@@ -43,6 +43,7 @@ class SelfContact:
         self._start = None          # finest positions at the last check (interval > 1)
         self._key = None            # (level, time) the next step must start from
         self._steps = 0             # steps since the last check
+        self._moved = self._before = None   # buffers of apply (see _buffers)
 
     def _due(self, k, state):
         """
@@ -80,22 +81,36 @@ class SelfContact:
         start = state.q[k] if self._start is None else self._start
         span = (self._steps + 1) * h    # the time the kernel's paths cover
         pairs, dropped = None, 0
+        moved, before = self._buffers(lv.shape)
+        moved[:] = True
         for attempt in range(ROUNDS):
             found, _, lost = kit.self_contact(
-                solver._q[k], solver._qd[k], solver._dv[k], start, lv.mass, holds.kind,
+                solver._q[k], solver._qd[k], solver._dv[k], start, lv.mass, holds.kind, moved,
                 self.thickness, self.friction, self.iterations, span)
             pairs = found if pairs is None else pairs
             dropped = max(dropped, lost)
             if not found or solver.strain_limit is None or attempt == ROUNDS - 1:
                 break
-            kit.strain_limit(solver._q[k], solver._qd[k], solver._dv[k], lv.rest, holds.kind,
-                             False, solver.strain_limit, solver.strain_refine_iterations,
-                             solver.strain_tolerance, h, solver._scratch[k])
+            np.copyto(before, solver._q[k])
+            if not kit.strain_limit(solver._q[k], solver._qd[k], solver._dv[k], lv.rest,
+                                    holds.kind, False, solver.strain_limit,
+                                    solver.strain_refine_iterations, solver.strain_tolerance,
+                                    h, solver._scratch[k]):
+                break   # nothing moved: contact again would find what this call left
+            # the next call tests only round the points strain limiting moved
+            np.any(solver._q[k] != before, axis=0, out=moved)
         if dropped:
             solver._extra['self_contact_dropped'] = dropped
         if pairs:
             solver._inject_down(levels)
         return pairs
+
+    def _buffers(self, shape):
+        """Return the moved-points mask and a positions copy for a level of ``shape``."""
+        if self._moved is None or self._moved.shape != tuple(shape):
+            self._moved = np.ones(shape, dtype=np.bool_)
+            self._before = np.empty((3,) + tuple(shape))
+        return self._moved, self._before
 
     def committed(self, k, state, checked):
         """Remember where the next step starts (the step to ``state`` was accepted)."""

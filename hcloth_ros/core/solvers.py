@@ -197,7 +197,7 @@ class Solver:
 
     def _post(self, k, state, holds, h, inherited_fixed):
         """
-        Strain limiting, then contact: no point ends the step inside an obstacle.
+        Contact's friction pass, strain limiting, then contact: no point ends inside an obstacle.
 
         Moving bodies' surface velocity is their motion over the step's ``dt`` (``h`` is
         the velocity's scale, ``beta`` on the multigrid solver's BDF2 level).
@@ -211,6 +211,15 @@ class Solver:
         if wrap:    # the level as integrated, to tell which points post-processing moved
             integrated = self._integrated[k]
             np.copyto(integrated, self._q[k])
+        has_scene = scene is not None and not scene.empty
+        touched = False
+        if has_scene:
+            # friction on the integration's motion, positions included, before strain
+            # limiting moves points (kernels.contact)
+            touched = kit.contact(self._q[k], self._qd[k], self._dv[k], state.q[k],
+                                  holds.kind, inherited_fixed, scene.planes, scene.boxes,
+                                  scene.spheres, scene.friction, scene.margin, self._dt,
+                                  True) > 0
         if limit is not None:
             sweeps = kit.strain_limit(
                 self._q[k], self._qd[k], self._dv[k], lv.rest, holds.kind, inherited_fixed,
@@ -218,7 +227,6 @@ class Solver:
                 self.strain_refine_iterations if inherited_fixed else self.strain_iterations,
                 self.strain_tolerance, h, self._scratch[k])
             self._extra[f'strain_sweeps_{k}'] = sweeps
-        touched = False
         if len(self._bodies):
             # before the static obstacles: a point squeezed between a body and the ground
             # ends on the ground, never inside it. Inherited points move too: a body holds
@@ -229,10 +237,11 @@ class Solver:
             if self._body_contact(k, state, holds, h, scene):
                 touched = True
                 self._inject = self._inject or inherited_fixed
-        if scene is not None and not scene.empty:
+        if has_scene:
             touched |= kit.contact(self._q[k], self._qd[k], self._dv[k], state.q[k],
                                    holds.kind, inherited_fixed, scene.planes, scene.boxes,
-                                   scene.spheres, scene.friction, scene.margin, self._dt) > 0
+                                   scene.spheres, scene.friction, scene.margin, self._dt,
+                                   False) > 0
         self._touched |= touched
         if touched and wrap:
             if self.self_contact is None:
@@ -266,7 +275,8 @@ class Solver:
             if scene is not None and not scene.empty:
                 pushes += kit.contact(self._q[k], self._qd[k], self._dv[k], state.q[k],
                                       holds.kind, False, scene.planes, scene.boxes,
-                                      scene.spheres, scene.friction, scene.margin, self._dt)
+                                      scene.spheres, scene.friction, scene.margin, self._dt,
+                                      False)
             if not pushes:
                 break
         self._extra['contact_rounds'] = done

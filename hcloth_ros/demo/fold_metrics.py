@@ -6,10 +6,12 @@ edge, so the near half of the rest rectangle (rest y below the middle) ends on t
 far half. On the finest grid before and after (``(rows, cols, 3)``, rows along the
 cloth's v axis, which the fold scene lays along +y):
 
-* ``top_below``: points of the top layer (the near half) lower than the bottom layer under
-  them: the bottom layer's height there is that of its point nearest in x and y; only top
-  points over the bottom layer count (nearest bottom point within one grid spacing).
-  0 means no part of the top half went through the bottom half.
+* ``top_below``: points of the top layer (the near half) lower than the bottom layer
+  under them: the bottom layer's surface height at the point's x and y, interpolated in
+  the bottom layer's triangle that lies under it (the highest, if several do); top points
+  over no bottom triangle do not count. 0 means no part of the top half went through the
+  bottom half. (The height of the nearest bottom point instead counted top-layer edge
+  points lying beside a wrinkle of the bottom layer, up to 5 on a clean fold.)
 * ``far_edge_moved``: how far the far edge's points moved at most (m), in 3-D.
 * ``fold_line``, ``fold_offset``: where the crease lies (the folded cloth's smallest y)
   and how far that is from where the client put it, the middle of the rest rectangle (m).
@@ -22,19 +24,41 @@ def fold_metrics(before, after):
     """Return the measures of the module docstring as a dict of floats and ints."""
     before, after = np.asarray(before, float), np.asarray(after, float)
     rows = before.shape[0]
-    top, bottom = after[:rows // 2].reshape(-1, 3), after[rows // 2 + 1:].reshape(-1, 3)
-    spacing = np.linalg.norm(before[1, 0] - before[0, 0])
-    below = 0
-    for chunk in np.array_split(top, max(1, len(top) // 512)):
-        d = np.linalg.norm(chunk[:, None, :2] - bottom[None, :, :2], axis=2)
-        nearest = np.argmin(d, axis=1)
-        over = d[np.arange(len(chunk)), nearest] < spacing
-        below += int(np.sum(over & (chunk[:, 2] < bottom[nearest, 2])))
+    top = after[:rows // 2].reshape(-1, 3)
+    under = _height_under(after[rows // 2 + 1:], top[:, :2])
+    below = int(np.sum(top[:, 2] < under))
     middle = 0.5 * (before[..., 1].min() + before[..., 1].max())
     fold_line = float(after[..., 1].min())
     return {'top_below': below,
             'far_edge_moved': float(np.linalg.norm(after[-1] - before[-1], axis=1).max()),
             'fold_line': fold_line, 'fold_offset': abs(fold_line - middle)}
+
+
+def _height_under(grid, xy, chunk=256):
+    """
+    Return the height of a grid's surface under each of the points ``xy`` ``(n, 2)``.
+
+    Interpolated in the triangles (two per cell) whose projection on the x-y plane holds
+    the point, the highest where several do; -inf under no triangle.
+    """
+    r, c = grid.shape[:2]
+    corner = np.arange(r * c).reshape(r, c)[:-1, :-1].ravel()
+    tris = np.concatenate([np.stack([corner, corner + 1, corner + c + 1], axis=1),
+                           np.stack([corner, corner + c + 1, corner + c], axis=1)])
+    a, b, cc = (grid.reshape(-1, 3)[tris[:, i]] for i in range(3))
+    e, f = b[:, :2] - a[:, :2], cc[:, :2] - a[:, :2]
+    det = e[:, 0] * f[:, 1] - f[:, 0] * e[:, 1]
+    det = np.where(det == 0.0, np.nan, det)     # an edge-on triangle holds nothing
+    heights = np.full(len(xy), -np.inf)
+    for start in range(0, len(xy), chunk):
+        g = xy[start:start + chunk, None, :] - a[None, :, :2]
+        wb = (g[..., 0] * f[:, 1] - f[:, 0] * g[..., 1]) / det
+        wc = (e[:, 0] * g[..., 1] - g[..., 0] * e[:, 1]) / det
+        wa = 1.0 - wb - wc
+        inside = (wa >= -1e-9) & (wb >= -1e-9) & (wc >= -1e-9)
+        z = wa * a[:, 2] + wb * b[:, 2] + wc * cc[:, 2]
+        heights[start:start + chunk] = np.where(inside, z, -np.inf).max(axis=1)
+    return heights
 
 
 def describe(metrics):

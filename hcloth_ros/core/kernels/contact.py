@@ -5,13 +5,25 @@ A point found inside an obstacle (grown by ``margin``) is moved out along the ob
 normal; its inward normal velocity stops and Coulomb friction slows its tangential
 velocity (never reversing it). See :mod:`hcloth_ros.core.scene` for the obstacle arrays.
 
+A solver calls it twice a step on a level. The first pass (``integration_pass``), right
+after the integration, also takes friction off the step's motion: a point's tangential
+displacement since the start of the step shrinks by ``h`` times the velocity friction
+removed, as if the step had moved it with the slowed velocity. Friction on velocity alone
+stopped a point only from the next step on, after the step had moved it: the fold demo's
+cloth crept 20 cm along the ground towards the grippers, under any friction coefficient.
+The second pass comes after strain limiting and acts on velocity alone: taking strain
+limiting's moves back too fought it: a cloth draped over a table kept its springs at the
+edge stretched and the part on the table rippled by 3.9 mm (``test_physics``' drape
+allows 1 mm).
+
 A point that was already inside the bare obstacle when the step started (an obstacle set
 where the cloth is, a cloth started inside one) gains ``RECOVERY_SPEED * h`` on its way
-out each call, on top of whatever the step moved it back in (the cloth's weight pulling
-it down, strain limiting), and no more (a solver calling contact several times a step,
-as its rounds on the finest level do, moves it out that much faster): pushed out at once,
-a cloth across a box had springs stretched to 390 % and kept them for seconds; pulled out
-at a fixed rate, the weight of the draped cloth held points inside for good.
+out each call after the first, on top of whatever the step moved it back in (the cloth's
+weight pulling it down, strain limiting), and no more (a solver calling contact several
+times a step, as its rounds on the finest level do, moves it out that much faster):
+pushed out at once, a cloth across a box had springs stretched to 390 % and kept them for
+seconds; pulled out at a fixed rate, the weight of the draped cloth held points inside
+for good.
 """
 
 import math
@@ -24,11 +36,14 @@ RECOVERY_SPEED = 1.0     # m/s: how fast a point found inside an obstacle is mov
 
 
 @numba.njit(**JIT)
-def _resolve(q, qd, dv, r, c, nx, ny, nz, depth, friction):
+def _resolve(q, qd, dv, q_prev, r, c, nx, ny, nz, depth, friction, h, on_position):
     """
-    Move point (r, c) ``depth`` along the unit normal n.
+    Move point (r, c) ``depth`` along the unit normal n; apply friction.
 
-    The contact's velocity change is applied and added to the step's ``dv``.
+    The contact's velocity change is applied and added to the step's ``dv``. Friction
+    removes up to ``friction`` times the normal speed stopped from the tangential velocity
+    and, ``on_position``, ``h`` times that from the tangential displacement since
+    ``q_prev``.
     """
     q[0, r, c] += depth * nx
     q[1, r, c] += depth * ny
@@ -37,10 +52,19 @@ def _resolve(q, qd, dv, r, c, nx, ny, nz, depth, friction):
     vn = vx * nx + vy * ny + vz * nz
     if vn >= 0.0:
         return
+    budget = friction * (-vn)
     tx, ty, tz = vx - vn * nx, vy - vn * ny, vz - vn * nz
     vt = math.sqrt(tx * tx + ty * ty + tz * tz)
-    scale = max(0.0, 1.0 - friction * (-vn) / vt) if vt > 0.0 else 0.0
-    for d, new in ((0, tx * scale), (1, ty * scale), (2, tz * scale)):
+    scale = max(0.0, 1.0 - budget / vt) if vt > 0.0 else 0.0
+    mx = q[0, r, c] - q_prev[0, r, c]
+    my = q[1, r, c] - q_prev[1, r, c]
+    mz = q[2, r, c] - q_prev[2, r, c]
+    mn = mx * nx + my * ny + mz * nz
+    mx, my, mz = mx - mn * nx, my - mn * ny, mz - mn * nz
+    moved = math.sqrt(mx * mx + my * my + mz * mz)
+    hold = min(1.0, budget * h / moved) if moved > 0.0 and on_position else 0.0
+    for d, new, back in ((0, tx * scale, mx), (1, ty * scale, my), (2, tz * scale, mz)):
+        q[d, r, c] -= back * hold
         dv[d, r, c] += new - qd[d, r, c]
         qd[d, r, c] = new
 
@@ -91,7 +115,9 @@ def contact(
         # by), holds, whether inherited points belong to the coarser level
         q_prev, hold_kind, inherited_fixed,
         # inputs: the obstacles, the step (s)
-        planes, boxes, spheres, friction, margin, h):
+        planes, boxes, spheres, friction, margin, h,
+        # whether this is the pass right after the integration (see the module docstring)
+        integration_pass):
     """
     Push the movable points of a level out of the obstacles.
 
@@ -103,7 +129,7 @@ def contact(
     """
     rows, cols = hold_kind.shape
     x, y, z = q[0], q[1], q[2]
-    recovery = RECOVERY_SPEED * h
+    recovery = 0.0 if integration_pass else RECOVERY_SPEED * h
     pushes = 0
     for p in range(planes.shape[0]):
         nx, ny, nz, offset = planes[p, 0], planes[p, 1], planes[p, 2], planes[p, 3]
@@ -116,7 +142,8 @@ def contact(
                         q_prev[2, r, c] * nz - offset
                     if before < 0.0:
                         depth = min(depth, recovery + max(0.0, before - dist - margin))
-                    _resolve(q, qd, dv, r, c, nx, ny, nz, depth, friction)
+                    _resolve(q, qd, dv, q_prev, r, c, nx, ny, nz, depth, friction, h,
+                             integration_pass)
                     pushes += 1
     for b in range(boxes.shape[0]):
         box = boxes[b]
@@ -132,9 +159,9 @@ def contact(
                     depth = box[3 + axis] + margin - sign * (q[axis, r, c] - box[axis])
                     if started_inside:      # leaving by the top (+z)
                         depth = min(depth, recovery + max(0.0, q_prev[2, r, c] - z[r, c]))
-                    _resolve(q, qd, dv, r, c, sign if axis == 0 else 0.0,
+                    _resolve(q, qd, dv, q_prev, r, c, sign if axis == 0 else 0.0,
                              sign if axis == 1 else 0.0, sign if axis == 2 else 0.0, depth,
-                             friction)
+                             friction, h, integration_pass)
                     pushes += 1
     for s in range(spheres.shape[0]):
         cx, cy, cz, reach = spheres[s, 0], spheres[s, 1], spheres[s, 2], spheres[s, 3] + margin
@@ -150,8 +177,10 @@ def contact(
                 if before < spheres[s, 3]:
                     pen = min(pen, recovery + max(0.0, before - dist))
                 if dist > 0.0:
-                    _resolve(q, qd, dv, r, c, dx / dist, dy / dist, dz / dist, pen, friction)
+                    _resolve(q, qd, dv, q_prev, r, c, dx / dist, dy / dist, dz / dist, pen,
+                             friction, h, integration_pass)
                 else:
-                    _resolve(q, qd, dv, r, c, 0.0, 0.0, 1.0, pen, friction)
+                    _resolve(q, qd, dv, q_prev, r, c, 0.0, 0.0, 1.0, pen,
+                             friction, h, integration_pass)
                 pushes += 1
     return pushes
