@@ -175,6 +175,29 @@ def _incline(friction):
     return scene, normal, downhill, theta
 
 
+@pytest.mark.parametrize('solver', ['multigrid', 'hierarchical', 'approx'])
+@pytest.mark.parametrize('friction', [0.5, 0.2])
+def test_an_incline_holds_the_cloth_within_its_friction_angle(solver, friction):
+    """
+    Coulomb on a 20-degree incline: tan 20 = 0.36, so friction 0.5 holds, 0.2 does not.
+
+    Held, the cloth does not move at all in 1 s (it crept 3.7-5.5 cm when friction acted on
+    velocity alone: each step moved it before friction stopped it); sliding, it
+    accelerates at g (sin theta - mu cos theta) after its first steps, to round-off.
+    """
+    scene, normal, downhill, theta = _incline(friction)
+    origin = -0.2 * downhill - np.array([0, 0.2, 0]) + MARGIN * normal
+    model = _flat_cloth(origin, scene=scene, axis_u=downhill)
+    frames = _run(model, solver, lambda i, control: None, 60)
+    along = np.array([q.reshape(3, -1).mean(axis=1) @ downhill for q, _ in frames])
+    speed = np.array([qd.reshape(3, -1).mean(axis=1) @ downhill for _, qd in frames])
+    if friction > np.tan(theta):
+        assert abs(along[-1] - along[0]) < 1e-12
+    else:
+        slide = G * (np.sin(theta) - friction * np.cos(theta))
+        assert np.diff(speed[10:]).mean() / DT == pytest.approx(slide, rel=1e-6)
+
+
 @pytest.mark.parametrize('pad_friction', [None, 0.0, 0.8])
 def test_a_pad_pressing_the_cloth_on_an_incline_holds_it(pad_friction):
     """
