@@ -143,18 +143,18 @@ def _subset(planes, mask):
     return tuple(a[..., mask] for a in planes)
 
 
-def _pressed_layers(approach=0.0, slide=0.0):
+def _pressed_layers(approach=0.0, slide=0.0, resolution=(9, 9), levels=3):
     """
-    Return the folded 33 x 33 level pressed together at the end of a step.
+    Return the folded finest level (33 x 33 by default) pressed together at the end of a step.
 
     The step brought its top half 2.5 mm above the bottom one (half the thickness),
     moving down at ``approach`` m/s and sliding ``slide`` m along x over the step; the
     bottom half at rest. Returns ``(level, start, end, qd, top)``, ``top`` the top
     half's rows.
     """
-    model = folded_model(levels=3, ground=None)
-    lv = model.level(2)
-    start = folded_state(model, 0.5).q[2]
+    model = folded_model(resolution, levels, ground=None)
+    lv = model.level(levels - 1)
+    start = folded_state(model, 0.5).q[levels - 1]
     m = start.shape[1] // 2
     top = slice(m + 1, None)
     start[0, top] -= slide
@@ -197,6 +197,20 @@ def test_kernel_pushes_near_points_apart_as_brute_force_sees():
     upper, lower = _flat_rows(top)
     parting = qd[2, upper].mean() - qd[2, lower].mean()
     assert 0.0 <= parting < 0.5 * 0.3
+
+
+@pytest.mark.parametrize('resolution', [(9, 12), (12, 9), (9, 14), (9, 16)])
+def test_kernel_parts_pressed_layers_on_grids_of_any_width(resolution):
+    """
+    Grids whose patches do not split into whole blocks (17 x 23, 23 x 17, 17 x 27, 17 x 31).
+
+    The border patches have fewer blocks than the others; every pair must still be found
+    (a block list looked up by the wrong index left near points on widths 23 and 31).
+    """
+    lv, start, end, qd, _ = _pressed_layers(approach=0.3, resolution=resolution, levels=2)
+    assert violations(start, end, THICKNESS)[0] > 50
+    _run_kernel(lv, start, end, qd, 0.0)
+    assert violations(start, end, THICKNESS) == (0, 0)
 
 
 def test_kernel_friction_takes_at_most_mu_times_the_push_off_the_slide():

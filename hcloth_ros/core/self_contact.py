@@ -84,6 +84,7 @@ class SelfContact:
         moved, before = self._buffers(lv.shape)
         moved[:] = True
         for attempt in range(ROUNDS):
+            np.copyto(before, solver._q[k])
             found, _, lost = kit.self_contact(
                 solver._q[k], solver._qd[k], solver._dv[k], start, lv.mass, holds.kind, moved,
                 self.thickness, self.friction, self.iterations, span)
@@ -91,14 +92,14 @@ class SelfContact:
             dropped = max(dropped, lost)
             if not found or solver.strain_limit is None or attempt == ROUNDS - 1:
                 break
-            np.copyto(before, solver._q[k])
-            if not kit.strain_limit(solver._q[k], solver._qd[k], solver._dv[k], lv.rest,
-                                    holds.kind, False, solver.strain_limit,
-                                    solver.strain_refine_iterations, solver.strain_tolerance,
-                                    h, solver._scratch[k]):
-                break   # nothing moved: contact again would find what this call left
-            # the next call tests only round the points strain limiting moved
+            kit.strain_limit(solver._q[k], solver._qd[k], solver._dv[k], lv.rest, holds.kind,
+                             False, solver.strain_limit, solver.strain_refine_iterations,
+                             solver.strain_tolerance, h, solver._scratch[k])
+            # the next call tests round the points this call or strain limiting moved
+            # (elsewhere nothing changed since this call's first detection); none: done
             np.any(solver._q[k] != before, axis=0, out=moved)
+            if not moved.any():
+                break
         if dropped:
             solver._extra['self_contact_dropped'] = dropped
         if pairs:

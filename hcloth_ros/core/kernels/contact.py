@@ -8,8 +8,10 @@ velocity (never reversing it). See :mod:`hcloth_ros.core.scene` for the obstacle
 A solver calls it twice a step on a level. The first pass (``integration_pass``), right
 after the integration, also takes friction off the step's motion of the points that rest
 on the obstacle (that started the step within ``RESTING`` margins of it): a point's
-tangential displacement since the start of the step shrinks by ``h`` times the velocity
-friction removed, as if the step had moved it with the slowed velocity. Friction on
+tangential displacement since the start of the step shrinks by up to ``h`` times the
+friction's velocity budget (``friction`` times the normal speed stopped), as if the step
+had moved it with the slowed velocity (exactly so when the displacement is ``h`` times
+the tangential velocity, as after backward Euler). Friction on
 velocity alone stopped a point only from the next step on, after the step had moved it:
 the fold demo's cloth crept 20 cm along the ground towards the grippers, under any
 friction coefficient, and a cloth crept down a 20-degree incline of friction 0.5 at
