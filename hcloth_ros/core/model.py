@@ -75,6 +75,21 @@ class Level:
         return (self.rows, self.cols)
 
 
+def grid_triangles(rows, cols):
+    """
+    Triangles of a ``rows x cols`` grid as ``(2 * (rows-1) * (cols-1), 3)`` grid-order indices.
+
+    Each quad ``(r, c)`` splits along its ``(r, c)-(r+1, c+1)`` diagonal (see
+    :meth:`ClothModel.grid_triangles`).
+    """
+    r, c = np.meshgrid(np.arange(rows - 1), np.arange(cols - 1), indexing='ij')
+    a = (r * cols + c).ravel()
+    b = a + 1
+    d = a + cols
+    e = d + 1
+    return np.stack([np.stack([a, e, b], 1), np.stack([a, d, e], 1)], 1).reshape(-1, 3)
+
+
 class ClothModel:
     """
     Static data of a hierarchical cloth; build it with :class:`ClothBuilder`.
@@ -134,12 +149,7 @@ class ClothModel:
         face-centre point of the next level lies on a triangle edge.
         """
         lv = self.level(k)
-        r, c = np.meshgrid(np.arange(lv.rows - 1), np.arange(lv.cols - 1), indexing='ij')
-        a = (r * lv.cols + c).ravel()
-        b = a + 1
-        d = a + lv.cols
-        e = d + 1
-        return np.stack([np.stack([a, e, b], 1), np.stack([a, d, e], 1)], 1).reshape(-1, 3)
+        return grid_triangles(lv.rows, lv.cols)
 
     def area_share(self, k):
         """Each level-k point's share of the cloth's area (m^2), shape ``(rows, cols)``."""

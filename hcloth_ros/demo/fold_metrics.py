@@ -17,6 +17,7 @@ cloth's v axis, which the fold scene lays along +y):
   and how far that is from where the client put it, the middle of the rest rectangle (m).
 """
 
+from hcloth_ros.core.model import grid_triangles
 import numpy as np
 
 
@@ -41,10 +42,7 @@ def _height_under(grid, xy, chunk=256):
     Interpolated in the triangles (two per cell) whose projection on the x-y plane holds
     the point, the highest where several do; -inf under no triangle.
     """
-    r, c = grid.shape[:2]
-    corner = np.arange(r * c).reshape(r, c)[:-1, :-1].ravel()
-    tris = np.concatenate([np.stack([corner, corner + 1, corner + c + 1], axis=1),
-                           np.stack([corner, corner + c + 1, corner + c], axis=1)])
+    tris = grid_triangles(*grid.shape[:2])
     a, b, cc = (grid.reshape(-1, 3)[tris[:, i]] for i in range(3))
     e, f = b[:, :2] - a[:, :2], cc[:, :2] - a[:, :2]
     det = e[:, 0] * f[:, 1] - f[:, 0] * e[:, 1]
