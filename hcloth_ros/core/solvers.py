@@ -90,10 +90,10 @@ class Solver:
     :param self_contact_iterations: most rounds of detection and response a check (then one
         more that moves points alone).
     :param self_contact_interval: check every n-th step.
-    :param contact_rounds, contact_sweeps: on a step where the finest simulated level
-        touched an obstacle, most rounds of strain limiting (this many sweeps, every point
-        free) and contact on it, the coarser levels then taking its state (:meth:`_wrap`);
-        0 rounds: none.
+    :param contact_rounds, contact_sweeps: on a step where a refinement level or the
+        finest simulated level touched an obstacle, most rounds of strain limiting (this
+        many sweeps, every point free) and contact on it, the coarser levels taking the
+        finest state at the end of the step (:meth:`_wrap`); 0 rounds: none.
     """
 
     name = ''
@@ -205,8 +205,10 @@ class Solver:
         lv, kit = self.model.level(k), self.kernels(k)
         limit = self._strain_limit(inherited_fixed)
         scene = self.model.scene
-        wrap = limit is not None and k == self._finest_now and self.contact_rounds and (
-            len(self._bodies) or (scene is not None and not scene.empty))
+        # the finest level and every refinement level below it: a refinement level that
+        # wrapped the obstacle hands the next one inherited points that already do
+        wrap = limit is not None and (k == self._finest_now or inherited_fixed) and \
+            self.contact_rounds and (len(self._bodies) or (scene is not None and not scene.empty))
         integrated = None
         if wrap:    # the level as integrated, to tell which points post-processing moved
             integrated = self._integrated[k]
@@ -244,22 +246,25 @@ class Solver:
                                    False) > 0
         self._touched |= touched
         if touched and wrap:
-            if self.self_contact is None:
+            if self.self_contact is None or k != self._finest_now:
                 self._wrap(k, state, holds, h, limit, scene, integrated)
             else:       # after self-contact (see step)
                 self._deferred = (k, holds, h, limit, scene, integrated)
 
     def _wrap(self, k, state, holds, h, limit, scene, integrated):
         """
-        Alternate strain limiting and contact on the finest level, every point free.
+        Alternate strain limiting and contact on level k, every point free.
 
         Contact pushes single points out and so stretches their springs; the coarser
         levels' straight segments cut through a table's edge, and the finer points wrapped
         round it between inherited points already too close (2.9 at 65 x 65 on the table
-        scene). Here the inherited points move too and the coarser levels take the result
-        (:meth:`_inject_down`), up to ``contact_rounds`` rounds of ``contact_sweeps``
-        sweeps, until strain limiting corrects nothing or contact pushes nothing. A level
-        that contact left within the limit is left as it is (a cloth sliding on a plane).
+        scene). Here the inherited points move too, up to ``contact_rounds`` rounds of
+        ``contact_sweeps`` sweeps, until strain limiting corrects nothing or contact pushes
+        nothing. A level that contact left within the limit is left as it is (a cloth
+        sliding on a plane). Every refinement level that touches does this before the next
+        one steps, which then inherits points already round the edge (on the table scene at
+        65 x 65 the peak strain fell from 0.22, the finest level alone wrapping, to 0.134);
+        the coarser levels take the finest result at the end (:meth:`_inject_down`).
         """
         lv, kit = self.model.level(k), self.kernels(k)
         done = 0
@@ -279,7 +284,7 @@ class Solver:
                                       False)
             if not pushes:
                 break
-        self._extra['contact_rounds'] = done
+        self._extra[f'contact_rounds_{k}'] = done
         if done:
             self._pbd_velocity(k, state, integrated, h)
             self._inject = True
