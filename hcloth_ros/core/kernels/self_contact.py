@@ -36,7 +36,11 @@ point (so a point sliding over another layer's free edge is not flipped between 
 sides). Velocities lose their approach along that direction (inelastic: a push turned
 into velocity made the layers bounce and stretched the cloth); friction takes up to
 ``friction`` times the push off the point's sliding relative to the triangle over the
-step, and that move divided by ``h`` off their velocities.
+step, and that move divided by ``h`` off their velocities. A point above an obstacle
+(its ``support``: the obstacle's outward normal and the room left to its margin, see
+:func:`~hcloth_ros.core.self_contact.supports`) moves towards it by at most that room,
+by a push or by friction; with no room left its weight is zero for a push into it, and
+the other side of the pair moves alone.
 """
 
 import math
@@ -665,12 +669,36 @@ def _separation(x, p, i, j, k, side, thickness):
 
 
 @numba.njit(**JIT)
-def _resolve(x0, x1, qd, dv, inv_mass, cols, p, t, side, thickness, friction, h, one_side):
+def _blocked(support, v, nx, ny, nz):
+    """Whether vertex v has no room left to move along n (into its obstacle)."""
+    return support[3, v] <= 0.0 and \
+        support[0, v] * nx + support[1, v] * ny + support[2, v] * nz < 0.0
+
+
+@numba.njit(**JIT)
+def _room(support, v, a, nx, ny, nz):
+    """
+    Return the part of a move ``a`` along n that vertex v may make, and use its room.
+
+    Towards its obstacle it moves at most the room left (then stays at the margin).
+    """
+    into = -a * (support[0, v] * nx + support[1, v] * ny + support[2, v] * nz)
+    if into > support[3, v]:
+        a *= max(support[3, v], 0.0) / into
+        into = max(support[3, v], 0.0)
+    support[3, v] -= into
+    return a
+
+
+@numba.njit(**JIT)
+def _resolve(x0, x1, qd, dv, inv_mass, support, cols, p, t, side, thickness, friction, h,
+             one_side):
     """
     Push one pair apart (and apply its friction); returns whether it was violated.
 
     ``one_side``: only the point moves (only the triangle if the point is held): a pair
-    pushed apart alone is then satisfied whatever its neighbours do.
+    pushed apart alone is then satisfied whatever its neighbours do. A vertex resting on an
+    obstacle does not move into it (its weight is zero for this push).
     """
     i, j, k = _triangle(t, cols)
     nx, ny, nz, gap, u, v, w = _separation(x1, p, i, j, k, side, thickness)
@@ -685,6 +713,11 @@ def _resolve(x0, x1, qd, dv, inv_mass, cols, p, t, side, thickness, friction, h,
     if -gap > 2.0 * thickness + math.sqrt(rx * rx + ry * ry + rz * rz):
         return False
     ip, ii, ij, ik = inv_mass[p], inv_mass[i], inv_mass[j], inv_mass[k]
+    # the point moves along n, the triangle's vertices against it
+    ip = 0.0 if _blocked(support, p, nx, ny, nz) else ip
+    ii = 0.0 if _blocked(support, i, -nx, -ny, -nz) else ii
+    ij = 0.0 if _blocked(support, j, -nx, -ny, -nz) else ij
+    ik = 0.0 if _blocked(support, k, -nx, -ny, -nz) else ik
     if one_side:
         if ip > 0.0:
             ii, ij, ik = 0.0, 0.0, 0.0
@@ -700,10 +733,10 @@ def _resolve(x0, x1, qd, dv, inv_mass, cols, p, t, side, thickness, friction, h,
     lam = -gap / denom
     # positions apart; velocities lose only their approach (inelastic): a push turned
     # into velocity (push / h) made the layers bounce and stretched the cloth
-    _shift(x1, p, lam * ip, nx, ny, nz)
-    _shift(x1, i, -lam * ii * u, nx, ny, nz)
-    _shift(x1, j, -lam * ij * v, nx, ny, nz)
-    _shift(x1, k, -lam * ik * w, nx, ny, nz)
+    _shift(x1, p, _room(support, p, lam * ip, nx, ny, nz), nx, ny, nz)
+    _shift(x1, i, _room(support, i, -lam * ii * u, nx, ny, nz), nx, ny, nz)
+    _shift(x1, j, _room(support, j, -lam * ij * v, nx, ny, nz), nx, ny, nz)
+    _shift(x1, k, _room(support, k, -lam * ik * w, nx, ny, nz), nx, ny, nz)
     vn = 0.0
     for d, n_d in ((0, nx), (1, ny), (2, nz)):
         vn += (qd[d, p] - u * qd[d, i] - v * qd[d, j] - w * qd[d, k]) * n_d
@@ -722,10 +755,10 @@ def _resolve(x0, x1, qd, dv, inv_mass, cols, p, t, side, thickness, friction, h,
         slide = math.sqrt(rx * rx + ry * ry + rz * rz)
         if slide > 0.0:
             stop = min(slide, friction * -gap) / denom / slide
-            _move(x1, qd, dv, p, -stop * ip, rx, ry, rz, h)
-            _move(x1, qd, dv, i, stop * ii * u, rx, ry, rz, h)
-            _move(x1, qd, dv, j, stop * ij * v, rx, ry, rz, h)
-            _move(x1, qd, dv, k, stop * ik * w, rx, ry, rz, h)
+            # nor does friction drag a vertex into its obstacle
+            for idx, wt in ((p, -stop * ip), (i, stop * ii * u), (j, stop * ij * v),
+                            (k, stop * ik * w)):
+                _move(x1, qd, dv, idx, _room(support, idx, wt, rx, ry, rz), rx, ry, rz, h)
     return True
 
 
@@ -734,8 +767,10 @@ def self_contact(
         # inputs / outputs: the level after the step and its velocity change, corrected
         q, qd, dv,
         # inputs: positions at the start of the step, masses, holds, which points moved
-        # since this step's last call (all of them at its first)
-        q_prev, mass, hold_kind, moved,
+        # since this step's last call (all of them at its first); in / out: the outward
+        # unit normal of the obstacle below each point and its room to the obstacle's
+        # margin (shape (4, rows, cols); normal zero: none), the room used up in place
+        q_prev, mass, hold_kind, moved, support,
         # inputs: cloth thickness (m), friction coefficient, resolution passes, step (s)
         thickness, friction, iterations, h):
     """
@@ -749,7 +784,7 @@ def self_contact(
     if rows < 2 or cols < 2:
         return 0, 0, 0
     x1, x0 = q.reshape((3, n)), q_prev.reshape((3, n))
-    qdf, dvf = qd.reshape((3, n)), dv.reshape((3, n))
+    qdf, dvf, held_up = qd.reshape((3, n)), dv.reshape((3, n)), support.reshape((4, n))
     inv_mass = np.empty(n)
     for r in range(rows):
         for c in range(cols):
@@ -793,8 +828,8 @@ def self_contact(
         dirty[:, :] = False
         for _ in range(RESOLVE_PASSES):
             for e in range(kept):
-                if _resolve(x0, x1, qdf, dvf, inv_mass, cols, pairs[e, 0], pairs[e, 1],
-                            sides[e], target, friction, h, attempt == iterations):
+                if _resolve(x0, x1, qdf, dvf, inv_mass, held_up, cols, pairs[e, 0],
+                            pairs[e, 1], sides[e], target, friction, h, attempt == iterations):
                     _mark_pair(pairs[e, 0], pairs[e, 1], rows, cols, dirty)
     return first, substeps, dropped
 
