@@ -72,8 +72,9 @@ PARAMS = [
     Param('solver.dt', 1 / 60, 'simulated seconds per step (s)', 1e-6, 0.1, False),
     Param('solver.substeps', 1, 'solver steps per timer tick', 1, 100, False),
     Param('solver.contact_rounds', 16, 'most rounds of strain limiting (10 sweeps, every '
-          'point free) and contact on the finest level when it touches an obstacle; the '
-          'coarser levels then take its state; 0: none', 0, 1000, False),
+          'point free) and contact on each refinement level and on the finest level when '
+          'it touches an obstacle; the coarser levels then take the finest state; 0: none',
+          0, 1000, False),
     Param('self_contact.thickness', 0.0, 'self-contact: finest points stay this far from '
           "the cloth's own triangles and never cross one (m); 0 switches it off", 0.0, 0.1),
     Param('self_contact.friction', 0.3, 'self-contact: friction coefficient between layers',

@@ -19,9 +19,12 @@ def supports(scene, q, out):
 
     ``out[:3]`` the obstacle's outward unit normal, ``out[3]`` the point's distance to the
     obstacle grown by the scene's margin (at least 0): the nearer of the planes and of the
-    boxes' tops it lies over (inside a box's footprint, above its bottom). No such
-    obstacle: normal 0, room infinite. Self-contact moves a point towards its obstacle by
-    at most its room. Spheres and moving bodies are not supports.
+    boxes' tops it lies on or over (inside the top face grown by the margin, not below
+    it: a point hanging beside a box is not on its top). No such obstacle: normal 0, room
+    infinite. Self-contact moves a point towards its obstacle by at most its room.
+    Spheres and moving bodies are not supports, and of two planes a point is near only
+    the nearer counts (the scenes have one plane, the ground). Strain limiting between
+    self-contact's rounds does not look at supports.
     """
     out[:3] = 0.0
     out[3] = np.inf
@@ -35,7 +38,7 @@ def supports(scene, q, out):
     for box in scene.boxes:
         height = q[2] - (box[2] + box[5])
         over = (np.abs(q[0] - box[0]) < box[3] + scene.margin) & \
-            (np.abs(q[1] - box[1]) < box[4] + scene.margin) & (height > -box[5])
+            (np.abs(q[1] - box[1]) < box[4] + scene.margin) & (height >= -scene.margin)
         room = np.maximum(height - scene.margin, 0.0)
         nearer = over & (room < out[3])
         out[:2, nearer] = 0.0
