@@ -197,9 +197,23 @@ def _offset(x, p, i, j, k, u, v, w):
 
 
 @numba.njit(**JIT)
-def _crossing(x0, x1, p, t, cols, ta, tb, shift, thickness):
+def _plane_at(x0, x1, p, t, cols, tau, shift):
+    """Return p's signed distance to triangle t's plane at time ``tau``, and its normal."""
+    i, j, k = _triangle(t, cols)
+    sd, nx, ny, nz, _, _, _ = _plane(
+        _at(x0, x1, p, tau, shift), _at(x0, x1, i, tau, shift), _at(x0, x1, j, tau, shift),
+        _at(x0, x1, k, tau, shift))
+    return sd, (nx, ny, nz)
+
+
+@numba.njit(**JIT)
+def _crossing(x0, x1, p, t, cols, ta, tb, sda, na, sdb, nb, shift, thickness):
     """
     Twice the side (+-2) p came from if it crossed triangle t between ``ta`` and ``tb``.
+
+    ``sda``, ``na`` and ``sdb``, ``nb``: p's distance to the triangle's plane and its
+    normal at ``ta`` and ``tb`` (:func:`_plane_at`; each sub-interval's end is the next
+    one's start, computed once).
 
     0 if it did not cross. Crossing: its distance to the triangle's plane changes sign,
     and at the time that distance interpolates to zero it lies inside the triangle or
@@ -208,17 +222,11 @@ def _crossing(x0, x1, p, t, cols, ta, tb, shift, thickness):
     inside missed a point passing a free edge that lies exactly over another layer's
     edge, and tangled the two edges.)
     """
-    i, j, k = _triangle(t, cols)
-    sda, nax, nay, naz, _, _, _ = _plane(
-        _at(x0, x1, p, ta, shift), _at(x0, x1, i, ta, shift), _at(x0, x1, j, ta, shift),
-        _at(x0, x1, k, ta, shift))
-    sdb, nbx, nby, nbz, _, _, _ = _plane(
-        _at(x0, x1, p, tb, shift), _at(x0, x1, i, tb, shift), _at(x0, x1, j, tb, shift),
-        _at(x0, x1, k, tb, shift))
     if not sda * sdb < 0.0:
         return 0.0
-    if not nax * nbx + nay * nby + naz * nbz > 0.0:
+    if not na[0] * nb[0] + na[1] * nb[1] + na[2] * nb[2] > 0.0:
         return 0.0      # the triangle turned over: its plane's sign says nothing
+    i, j, k = _triangle(t, cols)
     tc = ta + (tb - ta) * sda / (sda - sdb)
     pc, a = _at(x0, x1, p, tc, shift), _at(x0, x1, i, tc, shift)
     b, c = _at(x0, x1, j, tc, shift), _at(x0, x1, k, tc, shift)
@@ -244,10 +252,12 @@ def _near(x1, p, t, cols, thickness):
     second.)
     """
     i, j, k = _triangle(t, cols)
+    sd = _plane(_point(x1, p), _point(x1, i), _point(x1, j), _point(x1, k))[0]
+    if abs(sd) > thickness * (1.0 + 1e-9):
+        return 0.0      # the closest point is no nearer than the plane (rounding aside)
     u, v, w = _closest(_point(x1, p), _point(x1, i), _point(x1, j), _point(x1, k))
     if not _offset(x1, p, i, j, k, u, v, w)[3] < thickness:
         return 0.0
-    sd = _plane(_point(x1, p), _point(x1, i), _point(x1, j), _point(x1, k))[0]
     return 1.0 if sd >= 0.0 else -1.0
 
 
@@ -411,11 +421,14 @@ def _pair_side(x0, x1, p, t, cols, thickness, substeps, shift):
     those (a point that went through and back) doubled the folded 129 x 129 drop's
     largest strain, since the tangle they leave behind is resolved later and worse.
     """
+    sda, na = _plane_at(x0, x1, p, t, cols, 0.0, shift)
     for sub in range(substeps):
-        side = _crossing(x0, x1, p, t, cols, sub / substeps, (sub + 1) / substeps, shift,
-                         thickness)
+        ta, tb = sub / substeps, (sub + 1) / substeps
+        sdb, nb = _plane_at(x0, x1, p, t, cols, tb, shift)
+        side = _crossing(x0, x1, p, t, cols, ta, tb, sda, na, sdb, nb, shift, thickness)
         if side != 0.0:
             return side
+        sda, na = sdb, nb
     return _near(x1, p, t, cols, thickness)
 
 
