@@ -205,15 +205,15 @@ class Solver:
         lv, kit = self.model.level(k), self.kernels(k)
         limit = self._strain_limit(inherited_fixed)
         scene = self.model.scene
+        has_scene = scene is not None and not scene.empty
         # the finest level and every refinement level below it: a refinement level that
         # wrapped the obstacle hands the next one inherited points that already do
         wrap = limit is not None and (k == self._finest_now or inherited_fixed) and \
-            self.contact_rounds and (len(self._bodies) or (scene is not None and not scene.empty))
+            self.contact_rounds and (len(self._bodies) or has_scene)
         integrated = None
         if wrap:    # the level as integrated, to tell which points post-processing moved
             integrated = self._integrated[k]
             np.copyto(integrated, self._q[k])
-        has_scene = scene is not None and not scene.empty
         touched = False
         if has_scene:
             # friction on the integration's motion, positions included, before strain
