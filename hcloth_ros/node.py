@@ -51,7 +51,7 @@ from hcloth_ros.grippers import GripperBank, points_within
 from hcloth_ros.node_params import (ALL_PARAMS, check_change, descriptor, NODE_PARAMS,
                                     scene_after, unknown_overrides)
 from hcloth_ros.obstacles import ObstacleBank
-from hcloth_ros.publishing import ClothPublisher
+from hcloth_ros.publishing import ClothPublisher, PublishThread
 from hcloth_ros.scene_markers import scene_markers
 from hcloth_ros.tick_stats import TickStats
 import numba
@@ -102,6 +102,9 @@ class ClothSimNode(Node):
             self.model, self.frame_id,
             self.create_publisher(PointCloud2, 'cloth/points', qos_profile_sensor_data),
             self.create_publisher(Marker, 'cloth/lod_marker', 10))
+        self._sender = None
+        if self.get_parameter('publish_thread').value:
+            self._sender = PublishThread(self.publisher.publish, self._on_send_error)
         self.create_service(Trigger, 'cloth/reset', self._on_reset)
         self._make_grippers()
         self._make_obstacles()
@@ -319,20 +322,43 @@ class ClothSimNode(Node):
         if moved:
             self._show_scene('bodies')
         t1 = time.perf_counter()
+        sent = self._wait_for_sender()
+        t1b = time.perf_counter()
         finest = self.solver.levels()[-1]
         lod = min(self.lod_level, finest) if self._levelled else finest
         cloud, marker = self.publisher.pack(self.state, finest, lod,
                                             self.get_clock().now().to_msg())
         t2 = time.perf_counter()
-        self.publisher.publish(cloud, marker)
+        if self._sender is not None:
+            self._sender.submit(cloud, marker)
+        else:
+            self.publisher.publish(cloud, marker)
         t3 = time.perf_counter()
         if self.recorder is not None:
             self.recorder.log_step(self.state, finest, lod, report, t3 - t0,
                                    self.dt * self.substeps, self._held_points(finest))
         t4 = time.perf_counter()
-        self.stats.add(step=t1 - t0, pack=t2 - t1, publish=t3 - t2, record=t4 - t3,
-                       tick=t4 - t0, levels=finest + 1, sim_time=self.state.time)
+        self.stats.add(step=t1 - t0, pack=t2 - t1b, publish=(t1b - t1) + (t3 - t2),
+                       send=sent, record=t4 - t3, tick=t4 - t0, levels=finest + 1,
+                       sim_time=self.state.time)
         self._govern(t4 - t0)
+
+    def _wait_for_sender(self):
+        """
+        Wait until the last tick's messages are sent; return how long sending them took (s).
+
+        0 without the publishing thread (the tick's own publish time says it all).
+        """
+        if self._sender is None:
+            return 0.0
+        if not self._sender.wait(timeout=1.0):
+            self.get_logger().error('cloth/points: the last cloud is still being sent after '
+                                    '1 s; packing the next one anyway',
+                                    throttle_duration_sec=1.0)
+        return self._sender.seconds[-1] if self._sender.seconds else 0.0
+
+    def _on_send_error(self, error):
+        self.get_logger().error(f'publishing failed: {error}', throttle_duration_sec=1.0)
 
     def _report_retry(self, report, steps):
         """Say what recovery did: n smaller steps went through, or none did."""
@@ -369,6 +395,9 @@ class ClothSimNode(Node):
     def destroy_node(self):
         # also called by the context's shutdown on a node whose __init__ was interrupted
         # (Ctrl-C during warm-up): only what exists is reported and closed
+        if getattr(self, '_sender', None) is not None:
+            self._sender.close()
+            self._sender = None
         if getattr(self, 'stats', None) is not None and self.stats.count:
             self.get_logger().info(f'tick stats {json.dumps(self.stats.summary())}')
         if getattr(self, 'recorder', None) is not None:

@@ -31,6 +31,8 @@ NODE_PARAMS = [
           '<shape> <sizes> [friction]" with shape box (3 half extents), sphere (radius) or '
           'capsule (radius, half length along its z), in m; each follows '
           'cloth/obstacles/<name>/pose; [""] = none'),
+    Param('publish_thread', True, 'send cloth/points and cloth/lod_marker from a thread '
+          'of their own while the timer thread steps on (false: send within the tick)'),
     Param('governor', True, 'shed refinement levels while ticks overrun the period '
           '(false: simulate every consumed level, however long a tick takes)',
           read_only=False),

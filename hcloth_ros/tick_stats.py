@@ -7,7 +7,8 @@ import time
 import numpy as np
 
 
-PHASES = ('step', 'pack', 'publish', 'record', 'tick')
+# send: the publishing thread's time for the tick before, outside the tick (0 without it)
+PHASES = ('step', 'pack', 'publish', 'send', 'record', 'tick')
 
 
 @dataclass

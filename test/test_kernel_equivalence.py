@@ -264,6 +264,22 @@ def test_eq7_level_and_prolong(rows, cols, literal, kit):
 
 
 @pytest.mark.parametrize('rows,cols', SHAPES)
+def test_paired_force_row_is_force_row_to_the_bit(rows, cols):
+    """Each spring evaluated once and its term negated at the other end: force_row's bits."""
+    from hcloth_ros.core.kernels import springs
+    lv = make_level(rows, cols, seed=5 * rows, noise=0.3)
+    args = (lv['rest'], lv['stiff'], 0.5, H)
+    terms = np.full((3, 6, 3, cols), np.nan)      # a term never written must not be read
+    for r in range(rows):
+        springs.forward_terms_row(lv['q'], lv['qd'], r, *args, terms[r % 3])
+        got = [np.empty(cols) for _ in range(3)]
+        springs.paired_force_row(terms, r, rows, *got)
+        want = [np.empty(cols) for _ in range(3)]
+        springs.force_row(lv['q'], lv['qd'], r, *args, True, *want)
+        assert all(np.array_equal(g, w) for g, w in zip(got, want)), r
+
+
+@pytest.mark.parametrize('rows,cols', SHAPES)
 def test_explicit_step(rows, cols):
     lv = make_level(rows, cols, seed=3 * rows, noise=0.3)
     args = (lv['q'], lv['qd'], lv['mass'], lv['rest'], lv['stiff'], 0.5, lv['kind'],
@@ -479,18 +495,20 @@ def test_strain_stats(rows, cols, kit):
     assert not kit.strain_stats(q, vbad, rest)[2]
 
 
-def test_add_prolonged_drift():
+@BUILDS
+@pytest.mark.parametrize('rows,cols', [(9, 11), (97, 91)])
+def test_add_prolonged_drift(rows, cols, kit):
     """Free inserted points move by the prolonged coarse drift; the others stay, bit for bit."""
-    fine = make_level(9, 11, seed=12)
-    coarse = make_level(5, 6, seed=13)
+    fine = make_level(rows, cols, seed=12)
+    coarse = make_level((rows + 1) // 2, (cols + 1) // 2, seed=13)
     q_new, q_old, qd_new = coarse['q'], coarse['q'] + 0.01, coarse['qd']
     drift = (q_new - q_old) - H * qd_new
-    inserted = np.ones((9, 11), dtype=bool)
+    inserted = np.ones((rows, cols), dtype=bool)
     inserted[::2, ::2] = False
     moves = inserted & (fine['kind'] == 0)
     q = fine['q'].copy()
-    kernels.add_prolonged_drift(q_new, q_old, qd_new, H, fine['kind'], q)
-    expected = fine['q'] + np.where(moves, ref_prolong(drift, 9, 11), 0.0)
+    kit.add_prolonged_drift(q_new, q_old, qd_new, H, fine['kind'], q)
+    expected = fine['q'] + np.where(moves, ref_prolong(drift, rows, cols), 0.0)
     assert np.array_equal(q, expected)
     assert np.array_equal(q[:, ~moves], fine['q'][:, ~moves])
 

@@ -5,12 +5,14 @@ Made-up tick times drive the governor; grippers act on a real engine Control; th
 publisher gets fake publishers that count what they are given.
 """
 
+import threading
+
 from hcloth_ros import params
 from hcloth_ros.core import ClothBuilder, Control, State
 from hcloth_ros.governor import finest_to_simulate, Governor
 from hcloth_ros.grippers import GripperBank, points_within
 from hcloth_ros.node_params import check_change, descriptor, NODE_PARAMS, unknown_overrides
-from hcloth_ros.publishing import ClothPublisher
+from hcloth_ros.publishing import ClothPublisher, PublishThread
 from hcloth_ros.ros_msgs import points_from_pointcloud2
 from hcloth_ros.tick_stats import TickStats
 import numpy as np
@@ -186,6 +188,50 @@ def test_publisher_packs_the_cloud_only_for_subscribers_and_reuses_markers(cloth
     assert out.pack(state, 2, 0, None)[1] is not marker
 
 
+def test_publish_thread_sends_every_tick_in_order_from_its_own_thread():
+    sent, threads = [], []
+
+    def send(cloud, marker):
+        threads.append(threading.get_ident())
+        sent.append((cloud, marker))
+
+    sender = PublishThread(send)
+    try:
+        for tick in range(50):
+            assert sender.wait(timeout=5.0)
+            sender.submit(f'cloud {tick}', f'marker {tick}')
+        assert sender.wait(timeout=5.0)
+    finally:
+        sender.close()
+    assert sent == [(f'cloud {t}', f'marker {t}') for t in range(50)]
+    assert set(threads) != {threading.get_ident()} and len(set(threads)) == 1
+    assert len(sender.seconds) == 50 and min(sender.seconds) >= 0.0
+
+
+def test_publish_thread_reports_errors_goes_on_and_sends_what_is_pending_on_close():
+    errors, sent, release = [], [], threading.Event()
+
+    def send(cloud, marker):
+        if cloud == 'bad':
+            raise RuntimeError('middleware says no')
+        release.wait(5.0)
+        sent.append(cloud)
+
+    sender = PublishThread(send, on_error=errors.append)
+    sender.submit('bad', None)
+    assert sender.wait(timeout=5.0)
+    assert [str(e) for e in errors] == ['middleware says no']
+    sender.submit('slow', None)
+    assert not sender.wait(timeout=0.05)    # still sending: the tick would wait
+    release.set()
+    assert sender.wait(timeout=5.0) and sent == ['slow']
+    sender.submit('last', None)
+    sender.close()
+    assert sent == ['slow', 'last']
+    sender.submit('after close', None)      # ignored, nothing raised
+    assert sent == ['slow', 'last']
+
+
 def test_runtime_changes_are_checked_against_the_model(cloth):
     model, _, _ = cloth
     assert check_change('lod_level', 2, model) is None
@@ -216,7 +262,7 @@ def test_tick_stats_summary_from_made_up_ticks():
     stats = TickStats(window=100)
     for i in range(200):
         t = (i % 100 + 1) * 1e-4
-        stats.add(step=t, pack=t, publish=t, record=0.0, tick=t, levels=3 + i % 2,
+        stats.add(step=t, pack=t, publish=t, send=t, record=0.0, tick=t, levels=3 + i % 2,
                   sim_time=i / 60)
     out = stats.summary()
     assert out['ticks'] == 200 and (out['levels_min'], out['levels_max']) == (3, 4)

@@ -46,7 +46,8 @@ def test_cache_directory_is_keyed_on_every_kernel_source(tmp_path):
 
 
 def test_parallel_builds_are_other_functions_with_their_own_cache_entries():
-    for name in ('eq7_level', 'strain_limit', 'strain_stats', 'system_apply'):
+    for name in ('eq7_level', 'strain_limit', 'strain_stats', 'system_apply',
+                 'add_prolonged_drift'):
         serial, parallel = getattr(kernels.SERIAL, name), getattr(kernels.PARALLEL, name)
         assert serial is not parallel
         assert parallel.targetoptions.get('parallel') and not serial.targetoptions.get(

@@ -162,7 +162,7 @@ def main(argv=None):
         top = s['top_levels']
         print(f'    {"":8s} every tick                     the {top["ticks"]} ticks at '
               f'{s["levels_max"]} levels')
-        for phase in ('step', 'pack', 'publish', 'record', 'tick'):
+        for phase in ('step', 'pack', 'publish', 'send', 'record', 'tick'):
             print(f'    {phase:8s} p50 {s[phase]["p50"]:7.3f} ms   p99 {s[phase]["p99"]:7.3f} ms'
                   f'   p50 {top[phase]["p50"]:7.3f} ms   p99 {top[phase]["p99"]:7.3f} ms')
     if args.first_start:

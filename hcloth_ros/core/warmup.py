@@ -36,7 +36,8 @@ COMPILE_SECONDS = {'strain_limit': 7.3, 'strain_limit_parallel': 6.0, 'eq7_level
                    'energy': 1.0, 'multigrid_cg': 13.3, 'assemble_hierarchy': 8.1,
                    'newton_residual': 1.8, 'anchor': 1.8, 'new_positions': 0.4,
                    'start_velocity': 0.3, 'prescribe': 0.3, 'prolong': 0.5, 'inject': 0.1,
-                   'points_by_id_f32': 0.3, 'self_contact': 18.8, 'body_contact': 6.3}
+                   'points_by_id_f32': 0.3, 'self_contact': 18.8, 'body_contact': 6.3,
+                   'add_prolonged_drift_parallel': 1.0}
 
 
 # Options a solver runs with to reach all its kernels: the multigrid solver refines by

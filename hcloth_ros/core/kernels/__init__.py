@@ -81,7 +81,8 @@ with keyed_cache():
     from hcloth_ros.core.kernels.bodies import body_contact
     from hcloth_ros.core.kernels.contact import contact
     from hcloth_ros.core.kernels.eq6 import eq6_first_sweep, eq6_second_sweep
-    from hcloth_ros.core.kernels.eq7 import (add_prolonged_drift, eq7_level,
+    from hcloth_ros.core.kernels.eq7 import (add_prolonged_drift,
+                                             add_prolonged_drift_parallel, eq7_level,
                                              eq7_level_parallel, prolong)
     from hcloth_ros.core.kernels.explicit import explicit_step
     from hcloth_ros.core.kernels.export import points_by_id_f32
@@ -123,8 +124,8 @@ def builds(rows, cols, threads):
     return PARALLEL if threads > 1 and rows * cols >= PAR_MIN_POINTS else SERIAL
 
 
-__all__ = ['add_prolonged_drift', 'anchor', 'assemble_hierarchy', 'body_contact', 'builds',
-           'chunk_count',
+__all__ = ['add_prolonged_drift', 'add_prolonged_drift_parallel', 'anchor',
+           'assemble_hierarchy', 'body_contact', 'builds', 'chunk_count',
            'conjugate_gradient', 'conjugate_gradient_parallel', 'contact', 'DRIVEN', 'energy',
            'eq6_first_sweep', 'eq6_second_sweep', 'eq7_level', 'eq7_level_parallel',
            'excess_threshold', 'explicit_step', 'FREE', 'inject', 'KERNELS', 'multigrid_cg',

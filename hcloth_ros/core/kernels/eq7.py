@@ -17,7 +17,8 @@ Level k inserts a point on every edge of level k-1. After level k-1 has stepped:
 
 from hcloth_ros.core.kernels.jit import JIT, serial_and_parallel
 from hcloth_ros.core.kernels.layout import advance_row, chunk_count, FREE
-from hcloth_ros.core.kernels.springs import force_row, stencil_sum_row
+from hcloth_ros.core.kernels.springs import (forward_terms_row, paired_force_row,
+                                             stencil_sum_row)
 import numba
 from numba import prange
 import numpy as np
@@ -54,18 +55,9 @@ def prolong(coarse, fine):
 
 
 @numba.njit(**JIT)
-def add_prolonged_drift(coarse_q_new, coarse_q_old, coarse_qd_new, h, hold_kind, q):
-    """
-    Move level k's free inserted points by the prolonged drift of level k-1 (in place).
-
-    The drift of a coarse point is what it moved beyond ``h`` times its new velocity,
-    ``(x_new - x_old) - h v_new`` (not zero when level k-1 steps by BDF2); an inserted
-    point of ``q`` takes the mean drift of its edge's two ends (the rule of
-    :func:`prolong`). Inherited and held points stay. One pass over the inserted points
-    where the numpy form (difference, prolongation, masks, sum) took six over the level.
-    """
-    rows, cols = hold_kind.shape
-    for r in range(rows):
+def _drift_rows(coarse_q_new, coarse_q_old, coarse_qd_new, h, hold_kind, q, r0, r1):
+    cols = hold_kind.shape[1]
+    for r in range(r0, r1):
         ra, rb = r // 2, (r + 1) // 2
         for c in range(1 - r % 2, cols, 2 - r % 2):     # inserted: not both even
             if hold_kind[r, c] != FREE:
@@ -77,6 +69,26 @@ def add_prolonged_drift(coarse_q_new, coarse_q_old, coarse_qd_new, h, hold_kind,
                 b = (coarse_q_new[d, rb, cb] - coarse_q_old[d, rb, cb]) \
                     - h * coarse_qd_new[d, rb, cb]
                 q[d, r, c] += 0.5 * (a + b)
+
+
+def add_prolonged_drift(coarse_q_new, coarse_q_old, coarse_qd_new, h, hold_kind, q):
+    """
+    Move level k's free inserted points by the prolonged drift of level k-1 (in place).
+
+    The drift of a coarse point is what it moved beyond ``h`` times its new velocity,
+    ``(x_new - x_old) - h v_new`` (not zero when level k-1 steps by BDF2); an inserted
+    point of ``q`` takes the mean drift of its edge's two ends (the rule of
+    :func:`prolong`). Inherited and held points stay. One pass over the inserted points
+    where the numpy form (difference, prolongation, masks, sum) took six over the level.
+    """
+    rows, cols = hold_kind.shape
+    chunks = chunk_count(rows, cols)
+    for ch in prange(chunks):
+        _drift_rows(coarse_q_new, coarse_q_old, coarse_qd_new, h, hold_kind, q,
+                    ch * rows // chunks, (ch + 1) * rows // chunks)
+
+
+add_prolonged_drift, add_prolonged_drift_parallel = serial_and_parallel(add_prolonged_drift)
 
 
 @numba.njit(**JIT)
@@ -104,8 +116,12 @@ def _inherit_row(coarse_q, coarse_qd, coarse_dv, r, q_out, qd_out, dv_out):
 def _eq7_rows(q, qd, mass, rest, stiffness, contraction, inv_diagonal, hold_kind,
               prescribed_dv, h, gravity, literal, coarse_q, coarse_qd, coarse_dv,
               dv_estimate, q_out, qd_out, dv_out, r0, r1):
-    cols = mass.shape[1]
+    rows, cols = mass.shape
     fx, fy, fz = np.empty(cols), np.empty(cols), np.empty(cols)
+    # forward spring terms of rows r-2 .. r (row t in slot t % 3): each spring once
+    terms = np.empty((3, stiffness.shape[0] // 2, 3, cols))
+    for t in range(max(r0 - 2, 0), r0):
+        forward_terms_row(q, qd, t, rest, stiffness, contraction, h, terms[t % 3])
     sx, sy, sz = np.empty(cols), np.empty(cols), np.empty(cols)
     h2 = h * h
     exact = 0.0 if literal else h
@@ -113,7 +129,8 @@ def _eq7_rows(q, qd, mass, rest, stiffness, contraction, inv_diagonal, hold_kind
     for r in range(r0, r1):
         # every column, inherited ones included (overwritten below): a contiguous loop
         # vectorises, a stride-2 one over the inserted points would not
-        force_row(q, qd, r, rest, stiffness, contraction, h, True, fx, fy, fz)
+        forward_terms_row(q, qd, r, rest, stiffness, contraction, h, terms[r % 3])
+        paired_force_row(terms, r, rows, fx, fy, fz)
         stencil_sum_row(dv_estimate, r, stiffness, shift, sx, sy, sz)
         kinds, m, w = hold_kind[r], mass[r], inv_diagonal[r]
         for d in range(q.shape[0]):
@@ -140,6 +157,9 @@ def eq7_level(
         # outputs: this level after the step and its velocity change
         q_out, qd_out, dv_out):
     """One refinement level of Table 1: constraint C, then eq. 7 on inserted points."""
+    for j in range(0, stiffness.shape[0], 2):
+        if rest[j] != rest[j + 1] or stiffness[j] != stiffness[j + 1]:
+            raise ValueError('eq7_level: opposite stencil entries must be one spring')
     _hold_estimates(hold_kind, prescribed_dv, dv_estimate)
     rows, cols = mass.shape
     chunks = chunk_count(rows, cols)
