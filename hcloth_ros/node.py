@@ -8,6 +8,9 @@ Steps the engine on a timer at ``rate_hz`` and after every tick publishes
 * ``cloth/lod_marker`` (``visualization_msgs/Marker``, ``TRIANGLE_LIST``): level
   ``lod_level``, changeable at runtime.
 
+Both are packed in the tick and sent from a thread of their own (``publish_thread``,
+default true) while the timer's thread steps on; the next tick waits for that send.
+
 Grippers (parameter ``grippers``, default ``['left', 'right']``), for each name:
 
 * ``cloth/grippers/<name>/pose`` (``geometry_msgs/PoseStamped`` in ``frame_id``): the

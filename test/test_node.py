@@ -18,11 +18,12 @@ from visualization_msgs.msg import Marker
 
 
 @pytest.fixture
-def graph():
+def graph(request):
     context = rclpy.Context()
     rclpy.init(context=context)
     executor = SingleThreadedExecutor(context=context)
-    sim = ClothSimNode(context=context)
+    sim = ClothSimNode(context=context,
+                       parameter_overrides=getattr(request, 'param', []))
     probe = rclpy.create_node('probe', context=context)
     executor.add_node(sim)
     executor.add_node(probe)
@@ -56,6 +57,22 @@ def test_publishes_finest_cloud_and_lod_marker(graph):
     assert pts[:, 2].mean() < 1.5 - 0.01
     # lod_level 1 (default) of a 9 x 9 level 0: 17 x 17 points, 2 * 16 * 16 triangles
     assert len(markers[-1].points) == 3 * 2 * 16 * 16
+
+
+def _stamp(msg):
+    return msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec
+
+
+@pytest.mark.parametrize('graph', [[], [Parameter('publish_thread', value=False)]],
+                         indirect=True, ids=['thread', 'in_tick'])
+def test_every_tick_publishes_once_in_order_with_or_without_the_thread(graph):
+    sim, _, clouds, markers, spin_until, _ = graph
+    assert spin_until(lambda: len(clouds) >= 20 and len(markers) >= 20)
+    assert (sim._sender is None) == (not sim.get_parameter('publish_thread').value)
+    for received in (clouds, markers):
+        stamps = [_stamp(m) for m in received]
+        assert all(b > a for a, b in zip(stamps, stamps[1:]))      # none twice, in order
+    assert all(points_from_pointcloud2(c).shape == (65 * 65, 3) for c in clouds[-5:])
 
 
 def test_lod_level_changes_at_runtime_and_out_of_range_is_refused(graph):
