@@ -106,6 +106,7 @@ class ClothSimNode(Node):
             self.create_publisher(PointCloud2, 'cloth/points', qos_profile_sensor_data),
             self.create_publisher(Marker, 'cloth/lod_marker', 10))
         self._sender = None
+        self._sends_seen = 0
         if self.get_parameter('publish_thread').value:
             self._sender = PublishThread(self.publisher.publish, self._on_send_error)
         self.create_service(Trigger, 'cloth/reset', self._on_reset)
@@ -325,17 +326,18 @@ class ClothSimNode(Node):
         if moved:
             self._show_scene('bodies')
         t1 = time.perf_counter()
-        sent = self._wait_for_sender()
+        free, sent = self._wait_for_sender()
         t1b = time.perf_counter()
         finest = self.solver.levels()[-1]
         lod = min(self.lod_level, finest) if self._levelled else finest
-        cloud, marker = self.publisher.pack(self.state, finest, lod,
-                                            self.get_clock().now().to_msg())
+        if free:
+            cloud, marker = self.publisher.pack(self.state, finest, lod,
+                                                self.get_clock().now().to_msg())
         t2 = time.perf_counter()
-        if self._sender is not None:
-            self._sender.submit(cloud, marker)
-        else:
+        if self._sender is None:
             self.publisher.publish(cloud, marker)
+        elif free:
+            self._sender.submit(cloud, marker)
         t3 = time.perf_counter()
         if self.recorder is not None:
             self.recorder.log_step(self.state, finest, lod, report, t3 - t0,
@@ -348,17 +350,25 @@ class ClothSimNode(Node):
 
     def _wait_for_sender(self):
         """
-        Wait until the last tick's messages are sent; return how long sending them took (s).
+        Wait until the last tick's messages are sent: ``(free, seconds)``.
 
-        0 without the publishing thread (the tick's own publish time says it all).
+        ``free``: this tick may pack and send (False when the last send is still running
+        after 1 s: this tick publishes nothing, rather than rewrite a marker the thread may
+        be reading). ``seconds``: how long the send that finished since the last tick took,
+        0 if none did (and always without the publishing thread, whose tick's own publish
+        time says it all).
         """
         if self._sender is None:
-            return 0.0
-        if not self._sender.wait(timeout=1.0):
-            self.get_logger().error('cloth/points: the last cloud is still being sent after '
-                                    '1 s; packing the next one anyway',
-                                    throttle_duration_sec=1.0)
-        return self._sender.seconds[-1] if self._sender.seconds else 0.0
+            return True, 0.0
+        free = self._sender.wait(timeout=1.0)
+        if not free:
+            self.get_logger().error('cloth/points and cloth/lod_marker: the messages of the '
+                                    'last tick are still being sent after 1 s; this tick '
+                                    'publishes nothing', throttle_duration_sec=1.0)
+        done = self._sender.sent
+        seconds = self._sender.seconds[-1] if done > self._sends_seen else 0.0
+        self._sends_seen = done
+        return free, seconds
 
     def _on_send_error(self, error):
         self.get_logger().error(f'publishing failed: {error}', throttle_duration_sec=1.0)

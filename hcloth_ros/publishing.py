@@ -58,10 +58,10 @@ class PublishThread:
 
     ``send`` is called with what :meth:`submit` was given, in that thread. A 257 x 257
     cloud costs the middleware 1-4 ms to copy and send; off the timer's thread that time
-    overlaps the next step's serial kernels (they release the GIL) instead of adding to
-    the tick. The node waits (:meth:`wait`) for the last tick's messages to be sent before
-    packing the next ones: the marker's points are reused between ticks, and a publisher
-    slower than the timer slows the tick (where it shows) instead of dropping messages.
+    overlaps the next step's kernels (they release the GIL) instead of adding to the tick.
+    The node waits (:meth:`wait`) for the last tick's messages to be sent before packing
+    the next ones: the marker's points are reused between ticks, and a publisher slower
+    than the timer slows the tick (where it shows) instead of dropping messages.
     """
 
     def __init__(self, send, on_error=None, window=36000):
@@ -71,17 +71,24 @@ class PublishThread:
         self._pending = None        # messages submitted and not yet taken by the thread
         self._busy = False          # the thread is sending
         self._closed = False
+        self.sent = 0               # sends finished (whether or not the middleware failed)
         self.seconds = deque(maxlen=window)     # how long each send took (s)
         self._thread = threading.Thread(target=self._run, name='hcloth_publish', daemon=True)
         self._thread.start()
 
     def submit(self, *messages):
-        """Hand one tick's messages to the thread (call :meth:`wait` first)."""
+        """
+        Hand one tick's messages to the thread; returns whether it took them.
+
+        Refused (False) after :meth:`close` and while the last messages are not sent yet
+        (call :meth:`wait` first): a submission never replaces one that is pending.
+        """
         with self._ready:
-            if self._closed:
-                return
+            if self._closed or self._pending is not None or self._busy:
+                return False
             self._pending = messages
             self._ready.notify_all()
+            return True
 
     def wait(self, timeout=None):
         """Block until everything submitted has been sent; returns whether it was."""
@@ -106,10 +113,20 @@ class PublishThread:
             start = time.perf_counter()
             try:
                 self._send(*messages)
-            except Exception as e:     # the middleware's errors vary by version
-                if self._on_error is not None:
-                    self._on_error(e)
-            self.seconds.append(time.perf_counter() - start)
-            with self._ready:
-                self._busy = False
-                self._ready.notify_all()
+            except BaseException as e:     # the thread must outlive any failure
+                self._report(e)
+            finally:
+                self.seconds.append(time.perf_counter() - start)
+                with self._ready:
+                    self.sent += 1
+                    self._busy = False
+                    self._ready.notify_all()
+
+    def _report(self, error):
+        """Pass a failed send to ``on_error``; a failing handler does not stop the thread."""
+        if self._on_error is None:
+            return
+        try:
+            self._on_error(error)
+        except BaseException:      # e.g. logging after the context shut down
+            pass

@@ -269,14 +269,19 @@ def test_paired_force_row_is_force_row_to_the_bit(rows, cols):
     from hcloth_ros.core.kernels import springs
     lv = make_level(rows, cols, seed=5 * rows, noise=0.3)
     args = (lv['rest'], lv['stiff'], 0.5, H)
-    terms = np.full((3, 6, 3, cols), np.nan)      # a term never written must not be read
-    for r in range(rows):
-        springs.forward_terms_row(lv['q'], lv['qd'], r, *args, terms[r % 3])
-        got = [np.empty(cols) for _ in range(3)]
-        springs.paired_force_row(terms, r, rows, *got)
-        want = [np.empty(cols) for _ in range(3)]
-        springs.force_row(lv['q'], lv['qd'], r, *args, True, *want)
-        assert all(np.array_equal(g, w) for g, w in zip(got, want)), r
+    # from the first row and from chunk starts further down, as eq7's row chunks start
+    for r0 in sorted({0, 1, 2, rows // 3, rows - 3}):
+        terms = np.full((3, 6, 3, cols), np.nan)      # a term never written must not be read
+        for t in range(max(r0 - 2, 0), r0):
+            springs.forward_terms_row(lv['q'], lv['qd'], t, *args, terms[t % 3])
+        for r in range(r0, rows):
+            springs.forward_terms_row(lv['q'], lv['qd'], r, *args, terms[r % 3])
+            got = [np.empty(cols) for _ in range(3)]
+            springs.paired_force_row(terms, r, rows, *got)
+            want = [np.empty(cols) for _ in range(3)]
+            springs.force_row(lv['q'], lv['qd'], r, *args, True, *want)
+            assert all(np.array_equal(g, w) for g, w in zip(got, want)), (r0, r)
+            assert all(np.array_equal(np.signbit(g), np.signbit(w)) for g, w in zip(got, want))
 
 
 @pytest.mark.parametrize('rows,cols', SHAPES)

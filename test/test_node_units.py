@@ -218,18 +218,43 @@ def test_publish_thread_reports_errors_goes_on_and_sends_what_is_pending_on_clos
         sent.append(cloud)
 
     sender = PublishThread(send, on_error=errors.append)
-    sender.submit('bad', None)
+    assert sender.submit('bad', None)
     assert sender.wait(timeout=5.0)
     assert [str(e) for e in errors] == ['middleware says no']
-    sender.submit('slow', None)
+    assert sender.submit('slow', None)
     assert not sender.wait(timeout=0.05)    # still sending: the tick would wait
+    assert not sender.submit('meanwhile', None)     # refused, not queued over 'slow'
     release.set()
     assert sender.wait(timeout=5.0) and sent == ['slow']
-    sender.submit('last', None)
+    assert sender.submit('last', None)
     sender.close()
+    assert sent == ['slow', 'last'] and sender.sent == 3
+    assert not sender.submit('after close', None)
     assert sent == ['slow', 'last']
-    sender.submit('after close', None)      # ignored, nothing raised
-    assert sent == ['slow', 'last']
+
+
+def test_publish_thread_outlives_a_failing_error_handler_and_any_exception():
+    sent = []
+
+    def send(cloud, marker):
+        if cloud == 'interrupt':
+            raise KeyboardInterrupt
+        if cloud == 'bad':
+            raise RuntimeError('middleware says no')
+        sent.append(cloud)
+
+    def on_error(error):
+        raise RuntimeError('the logger is gone')     # e.g. after the context shut down
+
+    sender = PublishThread(send, on_error=on_error)
+    try:
+        for cloud in ('bad', 'interrupt', 'good'):
+            assert sender.wait(timeout=5.0)
+            assert sender.submit(cloud, None)
+        assert sender.wait(timeout=5.0)
+    finally:
+        sender.close()
+    assert sent == ['good'] and sender.sent == 3
 
 
 def test_runtime_changes_are_checked_against_the_model(cloth):
