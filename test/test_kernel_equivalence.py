@@ -22,6 +22,8 @@ chunks in the parallel builds), randomly perturbed, with held points in the inte
 and on the border.
 """
 
+import functools
+
 from hcloth_ros.core import kernels
 from hcloth_ros.core.model import ClothBuilder, STENCIL_DC, STENCIL_DR
 from hcloth_ros.core.state import State
@@ -365,8 +367,15 @@ def test_strain_limit_local_stretch(centre, inherited_fixed, kit):
     assert np.array_equal(got[0][:, far], q[:, far])    # rows far from the pull stay
 
 
-def _unskipped_strain_limit():
-    """Both builds of strain limiting with the skipping of unchanged blocks switched off."""
+@functools.lru_cache(maxsize=None)
+def _strain_limit_builds(skip=True, sparse_share=None):
+    """
+    Both builds of strain limiting, variants: (serial, parallel).
+
+    ``skip`` False: every block of every dense sweep is swept; ``sparse_share``: the share
+    below which sweeps run sparse (1: always, unless no spring is a candidate; 10**9:
+    never, the dense sweeps alone; None: the module's).
+    """
     import types
     import numba
     from hcloth_ros.core.kernels import jit, strain
@@ -374,17 +383,26 @@ def _unskipped_strain_limit():
     def always(row_flags, lo, hi):
         return True
     flagged = numba.njit(always)
+    share = strain.SPARSE_SHARE if sparse_share is None else sparse_share
     builds = []
     for split, options in ((False, dict(jit.JIT, cache=False)),
                            (True, dict(jit.PJIT, cache=False))):
         sweep_py = strain._chunk_sweep.py_func
         sweep = numba.njit(**dict(jit.JIT, cache=False))(types.FunctionType(
-            sweep_py.__code__, dict(sweep_py.__globals__, _any_flagged=flagged), 'sweep'))
+            sweep_py.__code__, dict(sweep_py.__globals__,
+                                    **({} if skip else {'_any_flagged': flagged})), 'sweep'))
         limit_py = strain.strain_limit.py_func
+        candidates = strain._candidates_parallel if split else strain._candidates
         builds.append(numba.njit(**options)(types.FunctionType(
             limit_py.__code__, dict(limit_py.__globals__, _chunk_sweep=sweep,
-                                    SPLIT_ROWS=split), 'unskipped')))
+                                    SPLIT_ROWS=split, SPARSE_SHARE=share,
+                                    _candidates=candidates), 'variant')))
     return builds
+
+
+def _unskipped_strain_limit():
+    """Both builds with dense sweeps only, every block swept: the plain Jacobi sweep."""
+    return _strain_limit_builds(skip=False, sparse_share=10**9)
 
 
 def _bits(a):
@@ -429,6 +447,53 @@ def test_strain_limit_skipping_changes_no_bit():
                     assert runs[0] == runs[1], (r, amplitude, inherited_fixed)
                     compared += 1
     assert compared == len(rows) * 8
+
+
+@pytest.mark.parametrize('inherited_fixed', [False, True])
+def test_strain_limit_sparse_sweeps_change_no_bit(inherited_fixed):
+    """
+    Sparse sweeps give the bits of dense ones, switching either way mid-run.
+
+    Always sparse, the module's share, and a share that switches to dense sweeps and back
+    at other points, each against dense sweeps alone with nothing skipped: 97 x 91 levels
+    with a few pulled points, a pulled patch that spreads, every spring over, a NaN and
+    held points; 30 sweeps, tolerance 1e-4.
+    """
+    reference = _unskipped_strain_limit()
+    # (the sparse sweeps are the same code in both builds: the switching shares serial)
+    variants = [_strain_limit_builds(sparse_share=1),
+                (_strain_limit_builds(sparse_share=64)[0],) * 2,
+                (kernels.SERIAL.strain_limit, kernels.PARALLEL.strain_limit)]
+    rows, cols = 97, 91
+    du = 1.0 / (cols - 1)
+    cases = []
+    for seed, (pulls, patch, stretch) in enumerate([(3, 0, 1.0), (40, 0, 1.0), (0, 12, 1.0),
+                                                    (0, 0, 1.15), (5, 4, 1.02)]):
+        lv = make_level(rows, cols, seed=20 + seed, stretch=stretch, noise=0.02)
+        q = lv['q'].copy()
+        rng = np.random.default_rng(seed)
+        for _ in range(pulls):
+            q[2, rng.integers(rows), rng.integers(cols)] += rng.uniform(0.15, 1.0) * du
+        if patch:
+            q[2, 40:40 + patch, 30:30 + patch] += 0.5 * du * rng.random((patch, patch))
+        if seed == 4:
+            q[1, 60, 7] = np.nan
+        cases.append((q, lv))
+    compared = 0
+    for q, lv in cases:
+        dv = lv['rng'].standard_normal(q.shape)
+        for b, ref in enumerate(reference):
+            runs = []
+            for kernel in [ref] + [v[b] for v in variants]:
+                a = q.copy(), lv['qd'].copy(), dv.copy()
+                sweeps = kernel(*a, lv['rest'], lv['kind'], inherited_fixed, 0.1, 30, 1e-4,
+                                H, full_nan(q.shape))
+                runs.append((sweeps,) + tuple(_bits(x) for x in a))
+            assert runs[0][0] > 1       # some sweeps after the first
+            for r, run in enumerate(runs[1:]):
+                assert run == runs[0], (compared, b, r)
+            compared += 1
+    assert compared == 10
 
 
 def full_nan(shape):

@@ -31,7 +31,18 @@ are zero, exactly as a full sweep would compute them, so they are neither writte
 applied (adding zeros to every skipped row's state was most of a later sweep's cost once
 few rows stayed flagged). On a swinging cloth few rows stay flagged after the first sweep;
 on a hanging one many do, and skipping saves less.
+
+Sparse sweeps. Springs over their limit are usually few and scattered (the node's
+257 x 257 cloth, 8 s into a swing: 333 of 263,000, in 188 of 257 rows, 208 points moved by
+the first sweep), so a sweep may instead evaluate a list of springs: for the first sweep
+every spring longer than ``1 - CLOSE`` of its limit (found by a pass of squared lengths,
+no division and no stores), for a later one every spring of the points the sweep before
+corrected. The points with a spring over its limit gather their listed terms in the dense
+sweep's order (an unlisted spring's term is zero there), so both forms give the same bits;
+a sweep runs dense when its list exceeds 1 / ``SPARSE_SHARE`` of the level's springs.
 """
+
+import math
 
 from hcloth_ros.core.kernels.jit import JIT, serial_and_parallel
 from hcloth_ros.core.kernels.layout import chunk_count, FREE
@@ -45,6 +56,12 @@ import numpy as np
 BLOCK_POINTS = 2048
 # Spring terms per point: 4 forward directions x (x, y, z term, over-limit flag).
 TERMS = 16
+# A sweep runs in the sparse form (:func:`_sparse_sweep`) when the springs it must
+# evaluate are at most 1 / SPARSE_SHARE of the level's (4 per point), else dense.
+SPARSE_SHARE = 8
+# The first sweep's candidates are the springs longer than (1 - CLOSE) times their limit:
+# far more than rounding, so no spring over its limit is missed.
+CLOSE = 1e-9
 # Whether a build splits large levels into row chunks (only the parallel one does: in one
 # thread, chunk boundaries only cost an extra row of springs each).
 SPLIT_ROWS = False
@@ -152,18 +169,21 @@ def _term_views(terms, e, pad, cols):
 
 
 @numba.njit(**JIT)
-def _gather(movable, terms, pad, cols, lo, hi, corr):
+def _gather(movable, terms, pad, cols, lo, hi, corr, active):
     """
     Write the corrections of flat points ``lo .. hi-1``: the mean of their springs' terms.
 
     One pass over the block, every term of a point at once: it vectorises, and a pass per
     component cost 1.2x the sweep. A backward term is the forward term negated.
+    ``active``: 1.0 where a point takes a correction (movable, with a spring over its
+    limit), else 0.0.
     """
     x0, x1, x2, x3, x4, x5, x6, x7 = _term_views(terms, 0, pad, cols)
     y0, y1, y2, y3, y4, y5, y6, y7 = _term_views(terms, 1, pad, cols)
     z0, z1, z2, z3, z4, z5, z6, z7 = _term_views(terms, 2, pad, cols)
     c0, c1, c2, c3, c4, c5, c6, c7 = _term_views(terms, 3, pad, cols)
     m, ox, oy, oz = movable[lo:], corr[0, lo:], corr[1, lo:], corr[2, lo:]
+    act = active[lo:]
     for i in range(hi - lo):
         x = 0.0 + x0[i] - x1[i] + x2[i] - x3[i] + x4[i] - x5[i] + x6[i] - x7[i]
         y = 0.0 + y0[i] - y1[i] + y2[i] - y3[i] + y4[i] - y5[i] + y6[i] - y7[i]
@@ -173,6 +193,7 @@ def _gather(movable, terms, pad, cols, lo, hi, corr):
         ox[i] = x / n if use else 0.0
         oy[i] = y / n if use else 0.0
         oz[i] = z / n if use else 0.0
+        act[i] = 1.0 if use else 0.0
 
 
 @numba.njit(**JIT)
@@ -254,7 +275,7 @@ def _zero_columns(array, start, n):
 @numba.njit(**JIT)
 def _chunk_sweep(q, qd, dv, corr, movable, masks, rows, cols, r0, r1, block_rows, limit,
                  threshold, h, edge_before, edge_after, terms, applied, was_over, now_over,
-                 gathered):
+                 gathered, active):
     """
     One sweep over rows ``r0 .. r1-1`` (see the module docstring).
 
@@ -263,7 +284,8 @@ def _chunk_sweep(q, qd, dv, corr, movable, masks, rows, cols, r0, r1, block_rows
     ``applied``: the sweep is known to happen. ``was_over``: the rows the last sweep
     flagged (all for the first); ``now_over``: this sweep's flags of rows ``r0 .. r1-1``;
     ``gathered``: which of these rows had their corrections computed (the others' are zero
-    and left unwritten). Returns the springs over the tolerance counted here; rows stay
+    and left unwritten); ``active``: per point of the gathered rows, whether it takes a
+    correction (:func:`_gather`). Returns the springs over the tolerance counted here; rows stay
     uncorrected while none is seen and ``applied`` is False.
     """
     pad = cols + 1
@@ -294,7 +316,7 @@ def _chunk_sweep(q, qd, dv, corr, movable, masks, rows, cols, r0, r1, block_rows
         if own < b1:
             _copy_terms(edge_after, 0, terms, pad + (own - b0) * cols, cols)
         _flag_rows(terms, pad, cols, b0, b1, now_over)
-        _gather(movable, terms, pad, cols, b0 * cols, b1 * cols, corr)
+        _gather(movable, terms, pad, cols, b0 * cols, b1 * cols, corr, active)
         for r in range(b0, b1):
             gathered[r] = True
         if applied or count > 0:
@@ -303,6 +325,201 @@ def _chunk_sweep(q, qd, dv, corr, movable, masks, rows, cols, r0, r1, block_rows
         # carry the block's last row to the next block
         _copy_terms(terms, pad + (b1 - 1 - b0) * cols, terms, 1, cols)
     return count
+
+
+@numba.njit(**JIT)
+def _active_points(active, gathered, cols):
+    """Flat indices of the points the last dense sweep corrected (gathered rows only)."""
+    count = 0
+    for r in range(gathered.size):
+        if gathered[r]:
+            for i in range(r * cols, (r + 1) * cols):
+                count += active[i] > 0.0
+    points = np.empty(count, dtype=np.int64)
+    count = 0
+    for r in range(gathered.size):
+        if gathered[r]:
+            for i in range(r * cols, (r + 1) * cols):
+                if active[i] > 0.0:
+                    points[count] = i
+                    count += 1
+    return points
+
+
+@numba.njit(**JIT)
+def _spring_exists(j, i, rows, cols):
+    """Whether forward spring ``j`` (directions of :func:`_forward_terms`) leaves point i."""
+    if i < 0 or i >= rows * cols:
+        return False
+    r, c = i // cols, i % cols
+    if j == 0:
+        return c + 1 < cols
+    if r + 1 >= rows:
+        return False
+    return (j == 1) | ((j == 2) & (c + 1 < cols)) | ((j == 3) & (c > 0))
+
+
+@numba.njit(**JIT)
+def _in_set(slot, members, size, key):
+    """Whether ``key`` is among ``members[:size]``, ``slot[key]`` its position if so."""
+    t = slot[key]
+    return 0 <= t < size and members[t] == key
+
+
+@numba.njit(**JIT)
+def _springs_of(points, rows, cols, offsets, spring_slot):
+    """
+    Every spring (key ``j n + i``: direction j from point i) of the given points, once.
+
+    ``offsets``: the flat offsets of the four directions (int64 array);
+    ``spring_slot``: int32 scratch of ``4 rows cols`` entries, any content (a sparse set:
+    a key is in the list if its slot points at it).
+    """
+    n = rows * cols
+    springs = np.empty(8 * points.size, dtype=np.int64)
+    found = 0
+    for a in range(points.size):
+        p = points[a]
+        for j in range(offsets.shape[0]):
+            for first in (p, p - offsets[j]):
+                key = j * n + first
+                if _spring_exists(j, first, rows, cols) and \
+                        not _in_set(spring_slot, springs, found, key):
+                    spring_slot[key] = found
+                    springs[found] = key
+                    found += 1
+    return springs[:found]
+
+
+@numba.njit(**JIT)
+def _row_candidates(q, r, rows, cols, offsets, close2, keys, found):
+    """
+    Append to ``keys`` the springs leaving row r not shorter than ``sqrt(close2[j])``.
+
+    NaN lengths included. Each direction's row is first counted in a loop that
+    vectorises; only rows with a candidate are walked again to list them.
+    """
+    n = rows * cols
+    x, y, z = q[0], q[1], q[2]
+    for j in range(offsets.shape[0]):
+        if j > 0 and r + 1 >= rows:
+            break
+        c0 = r * cols + (1 if j == 3 else 0)
+        c1 = r * cols + (cols - 1 if (j == 0) | (j == 2) else cols)
+        o = offsets[j]
+        count = 0
+        for i in range(c0, c1):
+            dx, dy, dz = x[i + o] - x[i], y[i + o] - y[i], z[i + o] - z[i]
+            count += not (dx * dx + dy * dy + dz * dz <= close2[j])
+        if count == 0:
+            continue
+        for i in range(c0, c1):
+            dx, dy, dz = x[i + o] - x[i], y[i + o] - y[i], z[i + o] - z[i]
+            if not (dx * dx + dy * dy + dz * dz <= close2[j]):
+                keys[found] = j * n + i
+                found += 1
+    return found
+
+
+def _candidates(q, rows, cols, offsets, close2):
+    """
+    Springs that may be over their limits: squared length above ``close2`` or NaN.
+
+    ``close2[j]``: a bound a little under the square of direction j's limit (the exact
+    test is the sweep's own). Row chunks in parallel in the parallel build.
+    """
+    chunks = chunk_count(rows, cols) if SPLIT_ROWS else 1
+    keys = np.empty(4 * rows * cols, dtype=np.int64)    # chunk ch lists from 4 r0 cols
+    counts = np.zeros(chunks, dtype=np.int64)
+    for ch in prange(chunks):
+        r0, r1 = ch * rows // chunks, (ch + 1) * rows // chunks
+        found = 4 * r0 * cols
+        for r in range(r0, r1):
+            found = _row_candidates(q, r, rows, cols, offsets, close2, keys, found)
+        counts[ch] = found - 4 * r0 * cols
+    springs = np.empty(counts.sum(), dtype=np.int64)
+    at = 0
+    for ch in range(chunks):
+        start = 4 * (ch * rows // chunks) * cols
+        for t in range(counts[ch]):     # a loop: slice assignment compiles for seconds
+            springs[at + t] = keys[start + t]
+        at += counts[ch]
+    return springs
+
+
+_candidates, _candidates_parallel = serial_and_parallel(_candidates, SPLIT_ROWS=True)
+
+
+@numba.njit(**JIT)
+def _sparse_sweep(q, qd, dv, movable, rows, cols, offsets, limit, threshold, h, springs,
+                  slots):
+    """
+    One sweep evaluating only ``springs`` (keys of :func:`_springs_of`).
+
+    The list must hold every spring that can be over its limit: those of the last sweep's
+    corrected points (see the module docstring), or the candidates of the first sweep.
+    Each is evaluated as :func:`_direction` does, the points with a spring over its limit
+    gather their terms in :func:`_gather`'s order, and the corrections are applied (if
+    some spring is over the tolerance): the bits of a dense sweep. ``slots``: int32
+    scratch of at least ``5 rows cols`` entries, any content. Returns the points corrected
+    (empty when no spring was over the tolerance and nothing was applied).
+    """
+    n = rows * cols
+    spring_slot, point_slot = slots[:4 * n], slots[4 * n:5 * n]
+    found = springs.size
+    for t in range(found):
+        spring_slot[springs[t]] = t
+    terms = np.empty((4, found))                # x, y, z term, moves flag
+    points = np.empty(min(2 * found, n), dtype=np.int64)
+    gathered, count = 0, 0
+    for t in range(found):
+        j = springs[t] // n
+        i = springs[t] - j * n
+        k = i + offsets[j]
+        # spring_vector's arithmetic, and _row_candidates' squared length
+        dx, dy, dz = q[0, k] - q[0, i], q[1, k] - q[1, i], q[2, k] - q[2, i]
+        length = math.sqrt(dx * dx + dy * dy + dz * dz)
+        over = not (length <= limit[j])
+        a, b = movable[i], movable[k]
+        f = (1.0 - 0.5 * (a * b)) * (length - limit[j]) / length
+        terms[0, t] = f * dx if over else 0.0
+        terms[1, t] = f * dy if over else 0.0
+        terms[2, t] = f * dz if over else 0.0
+        moves = over & (a + b > 0.0)
+        terms[3, t] = 1.0 if moves else 0.0
+        count += moves & (length >= threshold[j])
+        if moves:
+            for end in (i, k):
+                if movable[end] > 0.0 and not _in_set(point_slot, points, gathered, end):
+                    point_slot[end] = gathered
+                    points[gathered] = end
+                    gathered += 1
+    if count == 0:
+        return points[:0]
+    corr = np.empty((3, gathered))
+    for g in range(gathered):
+        p = points[g]
+        x, y, z, m = 0.0, 0.0, 0.0, 0.0
+        for j in range(offsets.shape[0]):   # stencil order: forward, backward, per direction
+            for side in range(2):
+                first = p - side * offsets[j]
+                key = j * n + first     # a first end before point 0 would alias direction j-1
+                if first >= 0 and _in_set(spring_slot, springs, found, key):
+                    t = spring_slot[key]
+                    sign = 1.0 - 2.0 * side
+                    x += sign * terms[0, t]
+                    y += sign * terms[1, t]
+                    z += sign * terms[2, t]
+                    m += terms[3, t]
+        corr[0, g], corr[1, g], corr[2, g] = x / m, y / m, z / m
+    for g in range(gathered):
+        p = points[g]
+        for d in range(q.shape[0]):
+            e = corr[d, g]
+            q[d, p] += e
+            qd[d, p] += e / h
+            dv[d, p] += e / h
+    return points[:gathered]
 
 
 @numba.njit(**JIT)
@@ -368,8 +585,30 @@ def strain_limit(q, qd, dv, rest, hold_kind, inherited_fixed, max_stretch, max_i
     # rows flagged by the last sweep and by this one, alternating (the first visits all)
     row_flags = np.ones((2, rows), dtype=np.bool_)
     gathered = np.zeros(rows, dtype=np.bool_)      # rows whose corrections a sweep computed
+    active = np.empty(n)                            # points a sweep corrected (1.0)
+    # the sparse sweeps' sets live in the corrections' scratch: a dense sweep applies its
+    # corrections before a sparse one runs, and a sparse set tolerates any content
+    slots = cf.reshape(3 * n).view(np.int32)
+    close2 = np.empty(4)
+    offsets = np.empty(4, dtype=np.int64)   # flat, per direction
+    for j in range(4):
+        close2[j] = (limit[j] * (1.0 - CLOSE)) ** 2
+        offsets[j] = (1, cols, cols + 1, cols - 1)[j]
+    springs = _candidates(qf, rows, cols, offsets, close2)
+    sparse = springs.size * SPARSE_SHARE <= 4 * n
     for sweep in range(max_iterations):
         was_over, now_over = row_flags[sweep % 2], row_flags[(sweep + 1) % 2]
+        if sparse:
+            points = _sparse_sweep(qf, qdf, dvf, movable, rows, cols, offsets, limit,
+                                   threshold, h, springs, slots)
+            if points.size == 0:
+                return sweep
+            springs = _springs_of(points, rows, cols, offsets, slots)
+            if springs.size * SPARSE_SHARE > 4 * n:
+                sparse = False
+                for r in range(rows):   # the first dense sweep visits every row
+                    now_over[r] = True
+            continue
         at_edges = 0
         for ch in range(1, chunks):
             r = ch * rows // chunks - 1
@@ -380,7 +619,7 @@ def strain_limit(q, qd, dv, rest, hold_kind, inherited_fixed, max_stretch, max_i
                                       ch * rows // chunks, (ch + 1) * rows // chunks,
                                       block_rows, limit, threshold, h, edges[ch],
                                       edges[ch + 1], terms[ch], at_edges > 0, was_over,
-                                      now_over, gathered)
+                                      now_over, gathered, active)
         total = at_edges
         for ch in range(chunks):
             total += counts[ch]
@@ -390,7 +629,12 @@ def strain_limit(q, qd, dv, rest, hold_kind, inherited_fixed, max_stretch, max_i
             if at_edges == 0 and counts[ch] == 0:   # saw no spring over the tolerance
                 _apply_rows(qf, qdf, dvf, cf, gathered, ch * rows // chunks,
                             (ch + 1) * rows // chunks, cols, h)
+        points = _active_points(active, gathered, cols)
+        if points.size * SPARSE_SHARE <= 4 * n:
+            springs = _springs_of(points, rows, cols, offsets, slots)
+            sparse = springs.size * SPARSE_SHARE <= 4 * n
     return max_iterations
 
 
-strain_limit, strain_limit_parallel = serial_and_parallel(strain_limit, SPLIT_ROWS=True)
+strain_limit, strain_limit_parallel = serial_and_parallel(
+    strain_limit, SPLIT_ROWS=True, _candidates=_candidates_parallel)
