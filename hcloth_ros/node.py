@@ -70,7 +70,7 @@ from visualization_msgs.msg import Marker, MarkerArray
 __all__ = ['ClothSimNode', 'main', 'NODE_PARAMS']
 
 # What a first start costs on an empty numba cache (measured here: README, "First start").
-FIRST_START = 'about 20-25 s on 2 cores'
+FIRST_START = 'about 25-35 s on 2 cores'
 
 
 class ClothSimNode(Node):
