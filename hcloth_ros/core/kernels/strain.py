@@ -36,10 +36,11 @@ Sparse sweeps. Springs over their limit are usually few and scattered (the node'
 257 x 257 cloth, 8 s into a swing: 333 of 263,000, in 188 of 257 rows, 208 points moved by
 the first sweep), so a sweep may instead evaluate a list of springs: for the first sweep
 every spring longer than ``1 - CLOSE`` of its limit (found by a pass of squared lengths,
-no division and no stores), for a later one every spring of the points the sweep before
-corrected. The points with a spring over its limit gather their listed terms in the dense
-sweep's order (an unlisted spring's term is zero there), so both forms give the same bits;
-a sweep runs dense when its list exceeds 1 / ``SPARSE_SHARE`` of the level's springs.
+no division, which gives up once the list is too long), for a later one every spring of
+the points the sweep before corrected (listed only when a dense sweep moved few). The
+points with a spring over its limit gather their listed terms in the dense sweep's order
+(an unlisted spring's term is zero there), so both forms give the same bits; a sweep runs
+dense when its list exceeds 1 / ``SPARSE_SHARE`` of the level's springs.
 """
 
 import math
@@ -57,8 +58,10 @@ BLOCK_POINTS = 2048
 # Spring terms per point: 4 forward directions x (x, y, z term, over-limit flag).
 TERMS = 16
 # A sweep runs in the sparse form (:func:`_sparse_sweep`) when the springs it must
-# evaluate are at most 1 / SPARSE_SHARE of the level's (4 per point), else dense.
-SPARSE_SHARE = 8
+# evaluate are at most 1 / SPARSE_SHARE of the level's (4 per point), else dense (the
+# table scene's contact rounds, 129 x 129, about a third of the points moving each sweep:
+# 8 cost 2.2x the dense sweeps, 32 and 128 0.95x).
+SPARSE_SHARE = 32
 # The first sweep's candidates are the springs longer than (1 - CLOSE) times their limit:
 # far more than rounding, so no spring over its limit is missed.
 CLOSE = 1e-9
@@ -176,7 +179,7 @@ def _gather(movable, terms, pad, cols, lo, hi, corr, active):
     One pass over the block, every term of a point at once: it vectorises, and a pass per
     component cost 1.2x the sweep. A backward term is the forward term negated.
     ``active``: 1.0 where a point takes a correction (movable, with a spring over its
-    limit), else 0.0.
+    limit), else 0.0. Returns how many do.
     """
     x0, x1, x2, x3, x4, x5, x6, x7 = _term_views(terms, 0, pad, cols)
     y0, y1, y2, y3, y4, y5, y6, y7 = _term_views(terms, 1, pad, cols)
@@ -184,6 +187,7 @@ def _gather(movable, terms, pad, cols, lo, hi, corr, active):
     c0, c1, c2, c3, c4, c5, c6, c7 = _term_views(terms, 3, pad, cols)
     m, ox, oy, oz = movable[lo:], corr[0, lo:], corr[1, lo:], corr[2, lo:]
     act = active[lo:]
+    moved = 0
     for i in range(hi - lo):
         x = 0.0 + x0[i] - x1[i] + x2[i] - x3[i] + x4[i] - x5[i] + x6[i] - x7[i]
         y = 0.0 + y0[i] - y1[i] + y2[i] - y3[i] + y4[i] - y5[i] + y6[i] - y7[i]
@@ -194,6 +198,8 @@ def _gather(movable, terms, pad, cols, lo, hi, corr, active):
         oy[i] = y / n if use else 0.0
         oz[i] = z / n if use else 0.0
         act[i] = 1.0 if use else 0.0
+        moved += use
+    return moved
 
 
 @numba.njit(**JIT)
@@ -275,7 +281,7 @@ def _zero_columns(array, start, n):
 @numba.njit(**JIT)
 def _chunk_sweep(q, qd, dv, corr, movable, masks, rows, cols, r0, r1, block_rows, limit,
                  threshold, h, edge_before, edge_after, terms, applied, was_over, now_over,
-                 gathered, active):
+                 gathered, active, moved):
     """
     One sweep over rows ``r0 .. r1-1`` (see the module docstring).
 
@@ -285,14 +291,16 @@ def _chunk_sweep(q, qd, dv, corr, movable, masks, rows, cols, r0, r1, block_rows
     flagged (all for the first); ``now_over``: this sweep's flags of rows ``r0 .. r1-1``;
     ``gathered``: which of these rows had their corrections computed (the others' are zero
     and left unwritten); ``active``: per point of the gathered rows, whether it takes a
-    correction (:func:`_gather`). Returns the springs over the tolerance counted here; rows stay
-    uncorrected while none is seen and ``applied`` is False.
+    correction (:func:`_gather`), ``moved[0]`` how many. Returns the springs over the
+    tolerance counted here; rows stay uncorrected while none is seen and ``applied`` is
+    False.
     """
     pad = cols + 1
     _copy_terms(edge_before, 0, terms, 1, cols)
     for e in range(terms.shape[0]):
         terms[e, 0] = 0.0                   # the row above's (non-existent) last diagonal
     count = 0
+    moved[0] = 0
     done = r0                               # rows r0 .. done-1 are corrected
     for b0 in range(r0, r1, block_rows):
         b1 = min(b0 + block_rows, r1)
@@ -316,7 +324,7 @@ def _chunk_sweep(q, qd, dv, corr, movable, masks, rows, cols, r0, r1, block_rows
         if own < b1:
             _copy_terms(edge_after, 0, terms, pad + (own - b0) * cols, cols)
         _flag_rows(terms, pad, cols, b0, b1, now_over)
-        _gather(movable, terms, pad, cols, b0 * cols, b1 * cols, corr, active)
+        moved[0] += _gather(movable, terms, pad, cols, b0 * cols, b1 * cols, corr, active)
         for r in range(b0, b1):
             gathered[r] = True
         if applied or count > 0:
@@ -397,54 +405,62 @@ def _row_candidates(q, r, rows, cols, offsets, close2, keys, found):
     Append to ``keys`` the springs leaving row r not shorter than ``sqrt(close2[j])``.
 
     NaN lengths included. Each direction's row is first counted in a loop that
-    vectorises; only rows with a candidate are walked again to list them.
+    vectorises (views from the first column read: no negative-index handling); only rows
+    with a candidate are walked again to list them. Returns the new length of the list.
     """
     n = rows * cols
-    x, y, z = q[0], q[1], q[2]
     for j in range(offsets.shape[0]):
         if j > 0 and r + 1 >= rows:
             break
         c0 = r * cols + (1 if j == 3 else 0)
         c1 = r * cols + (cols - 1 if (j == 0) | (j == 2) else cols)
-        o = offsets[j]
+        xp, yp, zp = q[0, c0:], q[1, c0:], q[2, c0:]
+        o = c0 + offsets[j]
+        xn, yn, zn = q[0, o:], q[1, o:], q[2, o:]
+        bound = close2[j]
         count = 0
-        for i in range(c0, c1):
-            dx, dy, dz = x[i + o] - x[i], y[i + o] - y[i], z[i + o] - z[i]
-            count += not (dx * dx + dy * dy + dz * dz <= close2[j])
+        for i in range(c1 - c0):
+            dx, dy, dz = xn[i] - xp[i], yn[i] - yp[i], zn[i] - zp[i]
+            count += not (dx * dx + dy * dy + dz * dz <= bound)
         if count == 0:
             continue
-        for i in range(c0, c1):
-            dx, dy, dz = x[i + o] - x[i], y[i + o] - y[i], z[i + o] - z[i]
-            if not (dx * dx + dy * dy + dz * dz <= close2[j]):
-                keys[found] = j * n + i
+        for i in range(c1 - c0):
+            dx, dy, dz = xn[i] - xp[i], yn[i] - yp[i], zn[i] - zp[i]
+            if not (dx * dx + dy * dy + dz * dz <= bound):
+                keys[found] = j * n + c0 + i
                 found += 1
     return found
 
 
-def _candidates(q, rows, cols, offsets, close2):
+def _candidates(q, rows, cols, offsets, close2, most):
     """
     Springs that may be over their limits: squared length above ``close2`` or NaN.
 
     ``close2[j]``: a bound a little under the square of direction j's limit (the exact
-    test is the sweep's own). Row chunks in parallel in the parallel build.
+    test is the sweep's own). Returns ``(springs, True)``, or ``(empty, False)`` as soon as
+    a row chunk finds more than ``most`` (the sweep then runs dense). Row chunks in
+    parallel in the parallel build.
     """
     chunks = chunk_count(rows, cols) if SPLIT_ROWS else 1
-    keys = np.empty(4 * rows * cols, dtype=np.int64)    # chunk ch lists from 4 r0 cols
+    keys = np.empty((chunks, most + 4 * cols), dtype=np.int64)    # a row adds <= 4 cols
     counts = np.zeros(chunks, dtype=np.int64)
     for ch in prange(chunks):
-        r0, r1 = ch * rows // chunks, (ch + 1) * rows // chunks
-        found = 4 * r0 * cols
-        for r in range(r0, r1):
-            found = _row_candidates(q, r, rows, cols, offsets, close2, keys, found)
-        counts[ch] = found - 4 * r0 * cols
-    springs = np.empty(counts.sum(), dtype=np.int64)
+        found = 0
+        for r in range(ch * rows // chunks, (ch + 1) * rows // chunks):
+            found = _row_candidates(q, r, rows, cols, offsets, close2, keys[ch], found)
+            if found > most:
+                break
+        counts[ch] = found
+    total = counts.sum()
+    if total > most:
+        return np.empty(0, dtype=np.int64), False
+    springs = np.empty(total, dtype=np.int64)
     at = 0
     for ch in range(chunks):
-        start = 4 * (ch * rows // chunks) * cols
         for t in range(counts[ch]):     # a loop: slice assignment compiles for seconds
-            springs[at + t] = keys[start + t]
+            springs[at + t] = keys[ch, t]
         at += counts[ch]
-    return springs
+    return springs, True
 
 
 _candidates, _candidates_parallel = serial_and_parallel(_candidates, SPLIT_ROWS=True)
@@ -582,6 +598,7 @@ def strain_limit(q, qd, dv, rest, hold_kind, inherited_fixed, max_stretch, max_i
     terms = np.empty((chunks, TERMS, cols + 1 + block_rows * cols))
     edges = np.zeros((chunks + 1, TERMS, cols))  # forward terms of the row before chunk ch
     counts = np.zeros(chunks, dtype=np.int64)
+    moved = np.zeros(chunks, dtype=np.int64)        # points each chunk's sweep corrected
     # rows flagged by the last sweep and by this one, alternating (the first visits all)
     row_flags = np.ones((2, rows), dtype=np.bool_)
     gathered = np.zeros(rows, dtype=np.bool_)      # rows whose corrections a sweep computed
@@ -594,8 +611,7 @@ def strain_limit(q, qd, dv, rest, hold_kind, inherited_fixed, max_stretch, max_i
     for j in range(4):
         close2[j] = (limit[j] * (1.0 - CLOSE)) ** 2
         offsets[j] = (1, cols, cols + 1, cols - 1)[j]
-    springs = _candidates(qf, rows, cols, offsets, close2)
-    sparse = springs.size * SPARSE_SHARE <= 4 * n
+    springs, sparse = _candidates(qf, rows, cols, offsets, close2, 4 * n // SPARSE_SHARE)
     for sweep in range(max_iterations):
         was_over, now_over = row_flags[sweep % 2], row_flags[(sweep + 1) % 2]
         if sparse:
@@ -619,7 +635,7 @@ def strain_limit(q, qd, dv, rest, hold_kind, inherited_fixed, max_stretch, max_i
                                       ch * rows // chunks, (ch + 1) * rows // chunks,
                                       block_rows, limit, threshold, h, edges[ch],
                                       edges[ch + 1], terms[ch], at_edges > 0, was_over,
-                                      now_over, gathered, active)
+                                      now_over, gathered, active, moved[ch:ch + 1])
         total = at_edges
         for ch in range(chunks):
             total += counts[ch]
@@ -629,9 +645,9 @@ def strain_limit(q, qd, dv, rest, hold_kind, inherited_fixed, max_stretch, max_i
             if at_edges == 0 and counts[ch] == 0:   # saw no spring over the tolerance
                 _apply_rows(qf, qdf, dvf, cf, gathered, ch * rows // chunks,
                             (ch + 1) * rows // chunks, cols, h)
-        points = _active_points(active, gathered, cols)
-        if points.size * SPARSE_SHARE <= 4 * n:
-            springs = _springs_of(points, rows, cols, offsets, slots)
+        if moved.sum() * SPARSE_SHARE <= 4 * n:    # few moved: maybe sparse from here
+            springs = _springs_of(_active_points(active, gathered, cols), rows, cols,
+                                  offsets, slots)
             sparse = springs.size * SPARSE_SHARE <= 4 * n
     return max_iterations
 
