@@ -12,7 +12,7 @@ a triangle of the other layer to meet.
 from hcloth_ros.bench.self_contact import folded, GAP
 from hcloth_ros.core import ClothBuilder, Control, make_scene, make_solver, State
 from hcloth_ros.core import kernels
-from hcloth_ros.core.kernels.self_contact import RING
+from hcloth_ros.core.kernels.self_contact import patch_cache, RING
 import numpy as np
 import pytest
 
@@ -185,7 +185,7 @@ def _run_kernel(lv, start, end, qd, friction):
     result = kernels.self_contact(end, qd, dv, start, lv.mass,
                                   np.zeros(lv.shape, dtype=np.int8),
                                   np.ones(lv.shape, dtype=np.bool_), _no_support(lv),
-                                  THICKNESS, friction, 4, H)
+                                  THICKNESS, friction, 4, H, *patch_cache(*lv.shape), False)
     return dv, result
 
 
@@ -260,7 +260,7 @@ def test_kernel_leaves_a_sheet_with_nothing_near_bit_for_bit():
     pairs, _, _ = kernels.self_contact(end, qd, dv, start, lv.mass,
                                        np.zeros(lv.shape, dtype=np.int8),
                                        np.ones(lv.shape, dtype=np.bool_), _no_support(lv),
-                                       THICKNESS, 0.3, 4, H)
+                                       THICKNESS, 0.3, 4, H, *patch_cache(*lv.shape), False)
     assert pairs == 0
     assert np.array_equal(end, before) and not qd.any()
 

@@ -7,6 +7,7 @@ This module decides which level, between which positions, and what the coarser l
 afterwards.
 """
 
+from hcloth_ros.core.kernels.self_contact import patch_cache
 import numpy as np
 
 # Rounds of self-contact and strain limiting a check runs at most (see SelfContact.apply).
@@ -78,6 +79,7 @@ class SelfContact:
         self._key = None            # (level, time) the next step must start from
         self._steps = 0             # steps since the last check
         self._moved = self._before = self._support = None   # buffers of apply
+        self._patches = None        # the kernel's patch boxes, kept between a step's calls
 
     def _due(self, k, state):
         """
@@ -120,13 +122,15 @@ class SelfContact:
         span = (self._steps + 1) * h    # the time the kernel's paths cover
         pairs, dropped = None, 0
         moved, before, support = self._buffers(lv.shape)
+        boxes, ends, cones = self._patches
         moved[:] = True
         for attempt in range(ROUNDS):
             np.copyto(before, solver._q[k])
             supports(solver.model.scene, solver._q[k], support)
             found, _, lost = kit.self_contact(
                 solver._q[k], solver._qd[k], solver._dv[k], start, lv.mass, holds.kind, moved,
-                support, self.thickness, self.friction, self.iterations, span)
+                support, self.thickness, self.friction, self.iterations, span, boxes, ends,
+                cones, attempt > 0)
             pairs = found if pairs is None else pairs
             dropped = max(dropped, lost)
             if not found or solver.strain_limit is None or attempt == ROUNDS - 1:
@@ -135,7 +139,8 @@ class SelfContact:
                              False, solver.strain_limit, solver.strain_refine_iterations,
                              solver.strain_tolerance, h, solver._scratch[k])
             # the next call tests round the points this call or strain limiting moved
-            # (elsewhere nothing changed since this call's first detection); none: done
+            # (elsewhere nothing changed since this call's first detection, and the
+            # patch boxes it keeps are those of this state); none: done
             np.any(solver._q[k] != before, axis=0, out=moved)
             if not moved.any():
                 break
@@ -151,6 +156,7 @@ class SelfContact:
             self._moved = np.ones(shape, dtype=np.bool_)
             self._before = np.empty((3,) + tuple(shape))
             self._support = np.empty((4,) + tuple(shape))
+            self._patches = patch_cache(*shape)
         return self._moved, self._before, self._support
 
     def committed(self, k, state, checked):

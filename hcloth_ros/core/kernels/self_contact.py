@@ -262,9 +262,12 @@ def _near(x1, p, t, cols, thickness):
 
 
 @numba.njit(**JIT)
-def _patch_boxes(x0, x1, rows, cols, size, thickness, boxes, ends, cones):
+def _patch_boxes(x0, x1, rows, cols, size, thickness, boxes, ends, cones, stale):
     """
-    Swept box (grown by ``thickness``), boxes at both ends and normal cone of every patch.
+    Swept box (grown by ``thickness``), boxes at both ends and normal cone of the patches.
+
+    Only the patches marked in ``stale`` are computed (the others' points have not moved
+    since theirs were).
 
     Patch (I, J) holds the grid cells ``I size .. (I+1) size - 1`` by
     ``J size .. (J+1) size - 1``. ``boxes[P] = (min xyz, max xyz)`` over its vertices at
@@ -279,6 +282,8 @@ def _patch_boxes(x0, x1, rows, cols, size, thickness, boxes, ends, cones):
     pr, pc = boxes.shape[0], boxes.shape[1]
     for bi in range(pr):
         for bj in range(pc):
+            if not stale[bi, bj]:
+                continue
             r0, r1 = bi * size, min((bi + 1) * size, rows - 1)
             c0, c1 = bj * size, min((bj + 1) * size, cols - 1)
             box, cone = boxes[bi, bj], cones[bi, bj]
@@ -540,22 +545,20 @@ def _near_box(x0, x1, p, i, j, k, shift, thickness):
 
 
 @numba.njit(**JIT)
-def _detect(x0, x1, rows, cols, thickness, substeps, dirty, pairs, sides):
+def _detect(x0, x1, rows, cols, thickness, substeps, dirty, pairs, sides, boxes, ends,
+            cones):
     """
     Collect (point, triangle) pairs and their sides over the step.
 
     Patches of ``PATCH`` x ``PATCH`` grid cells are culled by their swept boxes and, next
-    to each other, by their normal cones (:func:`_pair_needed`); the pairs of patches
-    left test points against triangles. Only pairs of patches with at least one marked
-    in ``dirty`` are tested (after a response, those it moved a point of: elsewhere
-    nothing changed since the last detection). Returns how many pairs were found (those
-    beyond the arrays' capacity are not kept).
+    to each other, by their normal cones (:func:`_pair_needed`; ``boxes``, ``ends`` and
+    ``cones`` of :func:`_patch_boxes`, up to date); the pairs of patches left test points
+    against triangles. Only pairs of patches with at least one marked in ``dirty`` are
+    tested (after a response, those it moved a point of: elsewhere nothing changed since
+    the last detection). Returns how many pairs were found (those beyond the arrays'
+    capacity are not kept).
     """
-    pr, pc = (rows - 2) // PATCH + 1, (cols - 2) // PATCH + 1
-    boxes = np.empty((pr, pc, 6))
-    ends = np.empty((pr, pc, 15))
-    cones = np.empty((pr, pc, 4))
-    _patch_boxes(x0, x1, rows, cols, PATCH, thickness, boxes, ends, cones)
+    pr, pc = boxes.shape[0], boxes.shape[1]
     box_a, box_b, shift = np.empty(6), np.empty(6), np.empty(3)
     # blocks' boxes, computed for the patches that meet another one
     subs = np.empty(((rows - 2) // SUB + 1, (cols - 2) // SUB + 1, 15))
@@ -785,7 +788,11 @@ def self_contact(
         # margin (shape (4, rows, cols); normal zero: none), the room used up in place
         q_prev, mass, hold_kind, moved, support,
         # inputs: cloth thickness (m), friction coefficient, resolution passes, step (s)
-        thickness, friction, iterations, h):
+        thickness, friction, iterations, h,
+        # in / out: the patches' boxes, ends and cones (:func:`patch_cache`); whether they
+        # hold this step's boxes as of the last call, but at the patches of points marked
+        # moved (False: every patch is computed)
+        boxes, ends, cones, reuse):
     """
     Keep a level's points ``thickness`` away from its triangles (see the module docstring).
 
@@ -824,12 +831,21 @@ def self_contact(
         for c in range(cols):
             if moved[r, c]:
                 _mark_point(r * cols + c, rows, cols, dirty)
+    if boxes.shape[0] != dirty.shape[0] or boxes.shape[1] != dirty.shape[1]:
+        raise ValueError('self_contact: the patch cache does not fit the level')
+    # the patches whose boxes are out of date: those round points that moved since they
+    # were computed (this call's first detection: since the last call's)
+    stale = dirty.copy()
+    if not reuse:
+        stale[:, :] = True
     # pairs are pushed a little further than detection looks: one pushed to exactly the
     # thickness would be found again by rounding, and every round would run
     target = thickness * (1.0 + SLACK)
     for attempt in range(iterations + 1):
         # pushing a pair apart can bring a point near another triangle: detect again
-        found = _detect(x0, x1, rows, cols, thickness, substeps, dirty, pairs, sides)
+        _patch_boxes(x0, x1, rows, cols, PATCH, thickness, boxes, ends, cones, stale)
+        found = _detect(x0, x1, rows, cols, thickness, substeps, dirty, pairs, sides, boxes,
+                        ends, cones)
         kept = min(found, pairs.shape[0])
         first = found if first < 0 else first
         dropped = max(dropped, found - kept)
@@ -844,7 +860,14 @@ def self_contact(
                 if _resolve(x0, x1, qdf, dvf, inv_mass, held_up, cols, pairs[e, 0],
                             pairs[e, 1], sides[e], target, friction, h, attempt == iterations):
                     _mark_pair(pairs[e, 0], pairs[e, 1], rows, cols, dirty)
+        stale[:, :] = dirty
     return first, substeps, dropped
+
+
+def patch_cache(rows, cols):
+    """Return the patch boxes, ends and cones :func:`self_contact` keeps for a level."""
+    pr, pc = (rows - 2) // PATCH + 1, (cols - 2) // PATCH + 1
+    return np.empty((pr, pc, 6)), np.empty((pr, pc, 15)), np.empty((pr, pc, 4))
 
 
 @numba.njit(**JIT)
