@@ -122,7 +122,7 @@ class SelfContact:
         span = (self._steps + 1) * h    # the time the kernel's paths cover
         pairs, dropped = None, 0
         moved, before, support = self._buffers(lv.shape)
-        boxes, ends, cones = self._patches
+        boxes, ends, cones, touched = self._patches
         moved[:] = True
         for attempt in range(ROUNDS):
             np.copyto(before, solver._q[k])
@@ -130,7 +130,7 @@ class SelfContact:
             found, _, lost = kit.self_contact(
                 solver._q[k], solver._qd[k], solver._dv[k], start, lv.mass, holds.kind, moved,
                 support, self.thickness, self.friction, self.iterations, span, boxes, ends,
-                cones, attempt > 0)
+                cones, touched, attempt > 0)
             pairs = found if pairs is None else pairs
             dropped = max(dropped, lost)
             if not found or solver.strain_limit is None or attempt == ROUNDS - 1:
@@ -139,8 +139,9 @@ class SelfContact:
                              False, solver.strain_limit, solver.strain_refine_iterations,
                              solver.strain_tolerance, h, solver._scratch[k])
             # the next call tests round the points this call or strain limiting moved
-            # (elsewhere nothing changed since this call's first detection, and the
-            # patch boxes it keeps are those of this state); none: done
+            # (elsewhere nothing changed since this call's first detection) and
+            # recomputes the patch boxes there and where this call moved points; none
+            # moved: done
             np.any(solver._q[k] != before, axis=0, out=moved)
             if not moved.any():
                 break

@@ -789,10 +789,11 @@ def self_contact(
         q_prev, mass, hold_kind, moved, support,
         # inputs: cloth thickness (m), friction coefficient, resolution passes, step (s)
         thickness, friction, iterations, h,
-        # in / out: the patches' boxes, ends and cones (:func:`patch_cache`); whether they
-        # hold this step's boxes as of the last call, but at the patches of points marked
-        # moved (False: every patch is computed)
-        boxes, ends, cones, reuse):
+        # in / out: the patches' boxes, ends and cones and the patches the last call moved
+        # points of (:func:`patch_cache`); whether they hold this step's boxes as of the
+        # last call, but at the patches of those points and of the points marked moved
+        # (False: every patch is computed)
+        boxes, ends, cones, touched, reuse):
     """
     Keep a level's points ``thickness`` away from its triangles (see the module docstring).
 
@@ -834,10 +835,11 @@ def self_contact(
     if boxes.shape[0] != dirty.shape[0] or boxes.shape[1] != dirty.shape[1]:
         raise ValueError('self_contact: the patch cache does not fit the level')
     # the patches whose boxes are out of date: those round points that moved since they
-    # were computed (this call's first detection: since the last call's)
-    stale = dirty.copy()
-    if not reuse:
-        stale[:, :] = True
+    # were computed. At this call's first detection: those the caller marks (moved since
+    # the last call started) and those the last call moved points of (their boxes may be
+    # of a position the point has left again, even for its start)
+    stale = dirty | touched if reuse else np.ones_like(dirty)
+    touched[:, :] = False
     # pairs are pushed a little further than detection looks: one pushed to exactly the
     # thickness would be found again by rounding, and every round would run
     target = thickness * (1.0 + SLACK)
@@ -861,13 +863,15 @@ def self_contact(
                             pairs[e, 1], sides[e], target, friction, h, attempt == iterations):
                     _mark_pair(pairs[e, 0], pairs[e, 1], rows, cols, dirty)
         stale[:, :] = dirty
+        touched |= dirty
     return first, substeps, dropped
 
 
 def patch_cache(rows, cols):
-    """Return the patch boxes, ends and cones :func:`self_contact` keeps for a level."""
+    """Return the patch boxes, ends, cones and moved patches :func:`self_contact` keeps."""
     pr, pc = (rows - 2) // PATCH + 1, (cols - 2) // PATCH + 1
-    return np.empty((pr, pc, 6)), np.empty((pr, pc, 15)), np.empty((pr, pc, 4))
+    return (np.empty((pr, pc, 6)), np.empty((pr, pc, 15)), np.empty((pr, pc, 4)),
+            np.zeros((pr, pc), dtype=np.bool_))
 
 
 @numba.njit(**JIT)

@@ -58,9 +58,9 @@ BLOCK_POINTS = 2048
 # Spring terms per point: 4 forward directions x (x, y, z term, over-limit flag).
 TERMS = 16
 # A sweep runs in the sparse form (:func:`_sparse_sweep`) when the springs it must
-# evaluate are at most 1 / SPARSE_SHARE of the level's (4 per point), else dense (the
-# table scene's contact rounds, 129 x 129, about a third of the points moving each sweep:
-# 8 cost 2.2x the dense sweeps, 32 and 128 0.95x).
+# evaluate are at most 1 / SPARSE_SHARE of 4 per point (a little more than the level's
+# springs), else dense (the table scene's contact rounds, 129 x 129, about a third of the
+# points moving each sweep: 8 cost 2.2x the dense sweeps, 32 and 128 0.95x).
 SPARSE_SHARE = 32
 # The first sweep's candidates are the springs longer than (1 - CLOSE) times their limit:
 # far more than rounding, so no spring over its limit is missed.
@@ -402,7 +402,7 @@ def _springs_of(points, rows, cols, offsets, spring_slot):
 @numba.njit(**JIT)
 def _row_candidates(q, r, rows, cols, offsets, close2, keys, found):
     """
-    Append to ``keys`` the springs leaving row r not shorter than ``sqrt(close2[j])``.
+    Append to ``keys`` the springs leaving row r longer than ``sqrt(close2[j])``.
 
     NaN lengths included. Each direction's row is first counted in a loop that
     vectorises (views from the first column read: no negative-index handling); only rows
@@ -437,9 +437,9 @@ def _candidates(q, rows, cols, offsets, close2, most):
     Springs that may be over their limits: squared length above ``close2`` or NaN.
 
     ``close2[j]``: a bound a little under the square of direction j's limit (the exact
-    test is the sweep's own). Returns ``(springs, True)``, or ``(empty, False)`` as soon as
-    a row chunk finds more than ``most`` (the sweep then runs dense). Row chunks in
-    parallel in the parallel build.
+    test is the sweep's own). Returns ``(springs, True)``, or ``(empty, False)`` when more
+    than ``most`` turn up (a chunk stops looking once it alone has found more; the sweep
+    then runs dense). Row chunks in parallel in the parallel build.
     """
     chunks = chunk_count(rows, cols) if SPLIT_ROWS else 1
     keys = np.empty((chunks, most + 4 * cols), dtype=np.int64)    # a row adds <= 4 cols
@@ -608,10 +608,14 @@ def strain_limit(q, qd, dv, rest, hold_kind, inherited_fixed, max_stretch, max_i
     slots = cf.reshape(3 * n).view(np.int32)
     close2 = np.empty(4)
     offsets = np.empty(4, dtype=np.int64)   # flat, per direction
+    squares = True      # the limits' squares are normal floats: the candidates' bound holds
     for j in range(4):
         close2[j] = (limit[j] * (1.0 - CLOSE)) ** 2
         offsets[j] = (1, cols, cols + 1, cols - 1)[j]
-    springs, sparse = _candidates(qf, rows, cols, offsets, close2, 4 * n // SPARSE_SHARE)
+        squares &= 1e-150 < limit[j] < 1e150
+    springs, sparse = np.empty(0, dtype=np.int64), False
+    if squares and max_iterations > 0:
+        springs, sparse = _candidates(qf, rows, cols, offsets, close2, 4 * n // SPARSE_SHARE)
     for sweep in range(max_iterations):
         was_over, now_over = row_flags[sweep % 2], row_flags[(sweep + 1) % 2]
         if sparse:
