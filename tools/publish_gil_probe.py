@@ -1,12 +1,14 @@
 """
-How long rclpy's publish of a 257 x 257 cloud keeps other Python threads waiting.
+How long publishing a 257 x 257 cloud keeps another Python thread of the process waiting.
 
 The node sends its cloud from a thread of its own while the next step runs; the step's
-kernels release the GIL, the Python between them needs it. This probe publishes a
-786 KB PointCloud2 (66,049 float32 points) from one thread every 4 ms for 3 s while the
-main thread runs a Python loop, and reports the loop's gaps longer than 0.5 ms: time the
-main thread could not run Python. Start a subscriber first for the node's case (the
-README's figures), with the same Fast DDS profile in both processes:
+kernels release the GIL, the Python between them needs it and a core. This probe
+publishes a 786 KB PointCloud2 (66,049 float32 points) from one thread every 4 ms for 3 s
+while the main thread runs a Python loop, and reports the loop's gaps longer than 0.5 ms:
+time the main thread could not run Python, waiting for the GIL or for a core. Run it with
+and without a subscriber to tell the two apart (the README's figures: 0.6-1.4 ms a send
+with one on the same two cores, 0.02-0.06 ms without). The subscriber, with the same Fast
+DDS profile in both processes:
 
     export FASTDDS_DEFAULT_PROFILES_FILE=$(.venv/bin/python -c "from hcloth_ros.params
     import config_path; print(config_path('fastdds_large_clouds.xml'))")
@@ -20,30 +22,21 @@ README's figures), with the same Fast DDS profile in both processes:
 import threading
 import time
 
+from builtin_interfaces.msg import Time
+from hcloth_ros.ros_msgs import pointcloud2
 import numpy as np
 import rclpy
 from rclpy.qos import qos_profile_sensor_data
-from sensor_msgs.msg import PointCloud2, PointField
+from sensor_msgs.msg import PointCloud2
 
 POINTS = 257 * 257
-
-
-def cloud():
-    """Return a PointCloud2 of POINTS random float32 points (the node's layout)."""
-    msg = PointCloud2()
-    msg.height, msg.width, msg.point_step = 1, POINTS, 12
-    msg.row_step = 12 * POINTS
-    msg.fields = [PointField(name=n, offset=4 * i, datatype=PointField.FLOAT32, count=1)
-                  for i, n in enumerate('xyz')]
-    msg.data = np.random.default_rng(0).random(3 * POINTS).astype(np.float32).tobytes()
-    return msg
 
 
 def main(seconds=3.0):
     rclpy.init()
     node = rclpy.create_node('publish_gil_probe')
     publisher = node.create_publisher(PointCloud2, 'cloth/points', qos_profile_sensor_data)
-    msg = cloud()
+    msg = pointcloud2(np.random.default_rng(0).random((POINTS, 3)), 'world', Time())
     sends, stop = [], threading.Event()
 
     def sender():

@@ -97,6 +97,28 @@ def excess_threshold(limit, tolerance):
 
 
 @numba.njit(**JIT)
+def _spring_term(dx, dy, dz, length, valid, limit, threshold, a, b):
+    """
+    One spring's share of a sweep, from its vector ``d`` (first end to second) and length.
+
+    ``a``, ``b``: 1.0 where the first / second end may move. Returns the first end's term
+    ``share (|d| - limit) / |d| d`` (zeros unless the spring is ``valid`` and longer than
+    ``limit``), its flag (1.0: over the limit with a movable end) and whether it counts
+    for the stopping test (such a spring at least ``threshold`` long). The dense and the
+    sparse sweeps both call it, which is what keeps their bits equal.
+    """
+    # bitwise & on the flags, not `and`: a short circuit branches, and a loop with
+    # branches does not vectorise (measured: 1.6x the sweep)
+    over = valid & (not (length <= limit))
+    f = (1.0 - 0.5 * (a * b)) * (length - limit) / length
+    # a spring with no movable end counts nowhere: its ends' corrections are zero
+    moves = over & (a + b > 0.0)
+    # selects, not products with 0: a wrapped neighbour may be NaN
+    return (f * dx if over else 0.0, f * dy if over else 0.0, f * dz if over else 0.0,
+            1.0 if moves else 0.0, moves & (length >= threshold))
+
+
+@numba.njit(**JIT)
 def _direction(q, movable, valid, lo, stop, end, offset, limit, threshold, terms, e0, base):
     """
     Springs from flat points ``lo .. stop-1`` to the point ``offset`` further.
@@ -115,19 +137,9 @@ def _direction(q, movable, valid, lo, stop, end, offset, limit, threshold, terms
     count = 0
     for i in range(stop - lo):
         dx, dy, dz, length = spring_vector(xn, yn, zn, xp, yp, zp, i)
-        # bitwise & on the flags, not `and`: a short circuit branches, and a loop with
-        # branches does not vectorise (measured: 1.6x the sweep)
-        over = (valid[i] > 0.0) & (not (length <= limit))
-        a, b = mp[i], mn[i]
-        f = (1.0 - 0.5 * (a * b)) * (length - limit) / length
-        # a select, not a product with 0: a wrapped neighbour may be NaN
-        tx[i] = f * dx if over else 0.0
-        ty[i] = f * dy if over else 0.0
-        tz[i] = f * dz if over else 0.0
-        # a spring with no movable end counts nowhere: its ends' corrections are zero
-        moves = over & (a + b > 0.0)
-        flag[i] = 1.0 if moves else 0.0
-        count += moves & (length >= threshold)
+        tx[i], ty[i], tz[i], flag[i], counts = _spring_term(
+            dx, dy, dz, length, valid[i] > 0.0, limit, threshold, mp[i], mn[i])
+        count += counts
     for i in range(max(stop - lo, 0), end - lo):
         tx[i] = 0.0
         ty[i] = 0.0
@@ -492,19 +504,14 @@ def _sparse_sweep(q, qd, dv, movable, rows, cols, offsets, limit, threshold, h, 
         j = springs[t] // n
         i = springs[t] - j * n
         k = i + offsets[j]
-        # spring_vector's arithmetic, and _row_candidates' squared length
+        # spring_vector's arithmetic (a view per spring costs here), and _row_candidates'
+        # squared length
         dx, dy, dz = q[0, k] - q[0, i], q[1, k] - q[1, i], q[2, k] - q[2, i]
         length = math.sqrt(dx * dx + dy * dy + dz * dz)
-        over = not (length <= limit[j])
-        a, b = movable[i], movable[k]
-        f = (1.0 - 0.5 * (a * b)) * (length - limit[j]) / length
-        terms[0, t] = f * dx if over else 0.0
-        terms[1, t] = f * dy if over else 0.0
-        terms[2, t] = f * dz if over else 0.0
-        moves = over & (a + b > 0.0)
-        terms[3, t] = 1.0 if moves else 0.0
-        count += moves & (length >= threshold[j])
-        if moves:
+        terms[0, t], terms[1, t], terms[2, t], terms[3, t], counts = _spring_term(
+            dx, dy, dz, length, True, limit[j], threshold[j], movable[i], movable[k])
+        count += counts
+        if terms[3, t] > 0.0:       # over its limit with a movable end
             for end in (i, k):
                 if movable[end] > 0.0 and not _in_set(point_slot, points, gathered, end):
                     point_slot[end] = gathered
