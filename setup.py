@@ -12,8 +12,13 @@ setup(
         ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
         ('share/' + package_name, ['package.xml']),
         ('share/' + package_name + '/config', glob('config/*.yaml') + glob('config/*.xml')),
+        ('share/' + package_name + '/launch', glob('launch/*.launch.py')),
+        ('share/' + package_name + '/rviz', glob('rviz/*.rviz')),
     ],
-    install_requires=['setuptools', 'numpy', 'numba', 'pyyaml', 'matplotlib', 'tqdm'],
+    # the pip-installable imports; the ROS 2 ones (rclpy, messages, launch) are in
+    # package.xml: rosdep installs those (test/test_dependencies.py keeps both complete)
+    install_requires=['setuptools', 'numpy', 'numba', 'pyyaml', 'matplotlib', 'tqdm',
+                      'rerun-sdk==0.41.0', 'mcap'],
     zip_safe=True,
     maintainer='hcloth_ros maintainers',
     maintainer_email='maintainers@hcloth-ros.dev',

@@ -11,14 +11,38 @@ recording) go out through a live node; rclpy's own handlers shut the context dow
 """
 
 import faulthandler
+import re
 import signal
+import sys
 import threading
 
 import rclpy
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.impl.implementation_singleton import rclpy_implementation
 from rclpy.signals import SignalHandlerOptions
+import yaml
 
 STOP = threading.Event()
+BAD_CONFIGURATION = 2   # exit code of a start refused for its parameters (as argparse's)
+
+
+class StartupError(Exception):
+    """A node cannot start as configured: ``lines`` say why, one problem each."""
+
+    def __init__(self, lines):
+        super().__init__('; '.join(lines))
+        self.lines = list(lines)
+
+
+def _report(lines, name='hcloth_sim'):
+    """Write start-up errors in the ROS log format: rclpy's logging may not be up."""
+    for line in lines:
+        print(f'[ERROR] [{name}]: {line}', file=sys.stderr, flush=True)
+
+
+def rcl_reason(error):
+    """Return rcl's error text without its source locations (``, at /path/file.c:123``)."""
+    return re.sub(r',? at \S+:\d+', '', str(error)).strip()
 
 
 def request_stop(signum=None, frame=None):
@@ -38,20 +62,52 @@ def install_signal_handlers():
     faulthandler.register(signal.SIGUSR1, all_threads=True)
 
 
+def unreadable_params_files(argv):
+    """One line for each ``--params-file`` of ``argv`` that cannot be read as YAML."""
+    from hcloth_ros.node_params import params_files
+    lines = []
+    for path in params_files(argv):
+        try:
+            with open(path) as f:
+                yaml.safe_load(f)
+        except (OSError, yaml.YAMLError) as e:
+            lines.append(f'cannot start: params file {path}: {" ".join(str(e).split())}')
+    return lines
+
+
 def run(make_node, args=None, poll=0.1):
-    """Init rclpy without its signal handlers, build the node, spin until stopped."""
+    """
+    Init rclpy without its signal handlers, build the node, spin until stopped.
+
+    Returns the process's exit code: 0, or :data:`BAD_CONFIGURATION` when rcl refuses
+    the arguments (a params file that does not exist or does not parse) or the node
+    raises :class:`StartupError`, each reason logged on one line, no traceback.
+    """
     install_signal_handlers()
-    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+    unreadable = unreadable_params_files(sys.argv if args is None else args)
+    if unreadable:      # before rcl, whose own refusal adds a line of its internals
+        _report(unreadable)
+        return BAD_CONFIGURATION
+    try:
+        rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+    except rclpy_implementation.RCLError as e:
+        _report([f'cannot start: {rcl_reason(e)}'])
+        return BAD_CONFIGURATION
     node = None
+    code = 0
     try:
         node = make_node()
         executor = SingleThreadedExecutor()
         executor.add_node(node)
         while not STOP.is_set() and rclpy.ok():
             executor.spin_once(timeout_sec=poll)
+    except StartupError as e:
+        _report(e.lines)
+        code = BAD_CONFIGURATION
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     finally:
         if node is not None:
             node.destroy_node()
         rclpy.try_shutdown()
+    return code

@@ -7,13 +7,18 @@ change must pass before anything is applied: ranges are rclpy's (from the descri
 what depends on the model (level and point counts) is checked here.
 """
 
+import re
+
 from hcloth_ros import params
 from hcloth_ros.params import Param
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
+import yaml
 
 
 NODE_PARAMS = [
-    Param('rate_hz', 60.0, 'timer rate: steps and publications per second (Hz)', 1.0, 1000.0),
+    Param('real_time_factor', 1.0, 'simulated seconds per wall-clock second: the timer '
+          'ticks every solver.dt x solver.substeps / real_time_factor of steady time; 0: as '
+          'fast as possible (no governor)', 0.0, 1000.0, False),
     Param('frame_id', 'world', 'frame of every published position'),
     Param('lod_level', 1, 'level published as cloth/lod_marker (0 = coarsest)', 0, 9, False),
     Param('grippers', ['left', 'right'], 'gripper names: each gets '
@@ -33,6 +38,8 @@ NODE_PARAMS = [
           'cloth/obstacles/<name>/pose; [""] = none'),
     Param('publish_thread', True, 'send cloth/points and cloth/lod_marker from a thread '
           'of their own while the timer thread steps on (false: send within the tick)'),
+    Param('bag_path', '', "record the node's own topics (cloud, LOD marker, scene, /clock) to "
+          'this MCAP file (ros2 bag, Foxglove); empty: no bag'),
     Param('governor', True, 'shed refinement levels while ticks overrun the period '
           '(false: simulate every consumed level, however long a tick takes)',
           read_only=False),
@@ -40,22 +47,61 @@ NODE_PARAMS = [
 ALL_PARAMS = params.PARAMS + NODE_PARAMS
 
 
+SPEC_BY_NAME = {spec.name: spec for spec in ALL_PARAMS}
+
+
 def descriptor(spec):
-    """Return a parameter's ``ParameterDescriptor``: description, read-only flag, range."""
-    d = ParameterDescriptor(description=spec.description, read_only=spec.read_only)
-    scalar = spec.default if not isinstance(spec.default, list) else None
-    if spec.low is not None and not isinstance(scalar, bool):
-        if isinstance(scalar, float):
+    """
+    Return a parameter's ``ParameterDescriptor``: description, read-only flag, range.
+
+    Lists carry their elements' range too (rclpy checks ranges of scalars only; the node
+    checks lists itself, :func:`~hcloth_ros.params.check_value`), and
+    ``additional_constraints`` says in words what is allowed.
+    """
+    d = ParameterDescriptor(description=spec.description, read_only=spec.read_only,
+                            additional_constraints=params.allowed(spec))
+    element = spec.default[0] if isinstance(spec.default, list) else spec.default
+    if spec.low is not None and not isinstance(element, bool):
+        if isinstance(element, float):
             d.floating_point_range = [FloatingPointRange(from_value=float(spec.low),
                                                          to_value=float(spec.high), step=0.0)]
-        elif isinstance(scalar, int):
+        elif isinstance(element, int):
             d.integer_range = [IntegerRange(from_value=int(spec.low), to_value=int(spec.high),
                                             step=1)]
     return d
 
 
+def ros_type(spec):
+    """Return the ROS parameter type of ``spec`` (``double``, ``string[]``, ...)."""
+    names = {bool: 'bool', int: 'integer', float: 'double', str: 'string'}
+    if isinstance(spec.default, list):
+        return names[type(spec.default[0])] + '[]'
+    return names[type(spec.default)]
+
+
+def as_declared_type(spec, value):
+    """
+    Return ``value`` in the type ``spec`` is declared with, where that loses nothing.
+
+    ``cloth.width: 1`` in YAML or ``-p cloth.width:=1`` is an integer; rclpy would refuse
+    it for a floating-point parameter. Anything else is returned unchanged.
+    """
+    default = spec.default
+    if isinstance(default, float) and type(value) is int:
+        return float(value)
+    if (isinstance(default, list) and isinstance(default[0], float)
+            and isinstance(value, (list, tuple)) and value
+            and all(type(v) is int for v in value)):
+        return [float(v) for v in value]
+    return value
+
+
 def check_change(name, value, model):
     """Why a runtime change of ``name`` to ``value`` is refused for ``model``, or None."""
+    if name in SPEC_BY_NAME:
+        reason = params.check_value(SPEC_BY_NAME[name], value)
+        if reason:
+            return reason
     if name == 'lod_level' and not 0 <= value < model.level_count:
         return f'lod_level {value} out of range 0..{model.level_count - 1}'
     if name == 'pinned_points':
@@ -78,6 +124,52 @@ def scene_after(changes, current):
         return params.build_scene(params.resolve(values)), None
     except (ValueError, TypeError) as e:
         return None, f'scene refused, nothing changed: {e}'
+
+
+def startup_problems(overrides):
+    """
+    One line per override (params file, ``-p``) the node cannot start with.
+
+    ``overrides`` maps names to values; names of no parameter of the node are reported
+    apart (:func:`unknown_overrides`).
+    """
+    return [reason for name, value in overrides.items() if name in SPEC_BY_NAME
+            for reason in [params.check_value(SPEC_BY_NAME[name], value)] if reason]
+
+
+def params_files(argv):
+    """Return the ``--params-file`` paths of the ROS arguments in ``argv``."""
+    files, ros = [], False
+    for i, arg in enumerate(argv):
+        if arg == '--ros-args':
+            ros = True
+        elif arg == '--':
+            ros = False
+        elif ros and arg == '--params-file' and i + 1 < len(argv):
+            files.append(argv[i + 1])
+    return files
+
+
+def _key_pattern(key):
+    """Return a params file's node key (``/**``, ``/ns/name``, ``name``, ``*``) as a regex."""
+    key = key if key.startswith('/') else '/' + key
+    pattern = re.escape(key).replace(r'/\*\*/', '/(?:.*/)?')
+    return pattern.replace(r'\*\*', '.*').replace(r'\*', '[^/]*')
+
+
+def sections_for(path, fqn):
+    """
+    Return the node keys of a params file that apply to the node ``fqn`` (``/ns/name``).
+
+    rcl gives a node the ``ros__parameters`` of every key that matches it and ignores
+    the rest in silence: a file keyed to another name leaves the defaults in place.
+    """
+    with open(path) as f:
+        doc = yaml.safe_load(f) or {}
+    if not isinstance(doc, dict):
+        return []
+    return [key for key in doc if isinstance(key, str)
+            and re.fullmatch(_key_pattern(key), fqn)]
 
 
 def unknown_overrides(given, known):

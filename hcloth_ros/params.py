@@ -18,18 +18,30 @@ import yaml
 
 @dataclass(frozen=True)
 class Param:
+    """
+    One parameter: name, default (its type is the parameter's type), description, range.
+
+    ``low``/``high`` bound a number or every element of a list; ``choices`` lists the
+    allowed strings; ``length`` is a list's exact length, ``multiple`` what its length must
+    be a multiple of (the ROS-friendly "unset" ``[0.0]`` and ``[-1]`` aside).
+    """
+
     name: str
     default: object
     description: str
     low: float = None
     high: float = None
     read_only: bool = True
+    choices: tuple = None
+    length: int = None
+    multiple: int = None
 
 
 PARAMS = [
     Param('cloth.width', 1.0, 'cloth size along axis_u (m)', 0.01, 100.0),
     Param('cloth.height', 1.0, 'cloth size along axis_v (m)', 0.01, 100.0),
-    Param('cloth.resolution', [9, 9], 'level-0 points along u and v (each >= 2)', 2, 1025),
+    Param('cloth.resolution', [9, 9], 'level-0 points along u and v (each >= 2)', 2, 1025,
+          length=2),
     Param('cloth.levels', 4, 'number of hierarchy levels (finest has '
           '2^(levels-1) (n0-1)+1 points a side)', 1, 10),
     Param('cloth.mass', 0.2, 'total cloth mass (kg)', 1e-6, 1e3),
@@ -45,27 +57,31 @@ PARAMS = [
     Param('cloth.spring_damping', 0.0, 'damping of every spring along its length '
           '(N s/m; multigrid solver)', 0.0, 1e6),
     Param('cloth.origin', [-0.5, 0.0, 1.5], 'world position of grid point (0, 0) at t = 0 (m)',
-          -1e4, 1e4),
-    Param('cloth.axis_u', [1.0, 0.0, 0.0], 'world direction of the cloth width', -1.0, 1.0),
-    Param('cloth.axis_v', [0.0, 1.0, 0.0], 'world direction of the cloth height', -1.0, 1.0),
+          -1e4, 1e4, length=3),
+    Param('cloth.axis_u', [1.0, 0.0, 0.0], 'world direction of the cloth width', -1.0, 1.0,
+          length=3),
+    Param('cloth.axis_v', [0.0, 1.0, 0.0], 'world direction of the cloth height', -1.0, 1.0,
+          length=3),
     Param('scene.ground', True, 'a ground plane at scene.ground_z', read_only=False),
     Param('scene.ground_z', 0.0, 'ground height (m)', -1e4, 1e4, False),
     Param('scene.boxes', [0.0], 'axis-aligned boxes, 6 numbers each: centre xyz, half '
-          'extents xyz (m); [0.0] = none', -1e4, 1e4, False),
+          'extents xyz (m); [0.0] = none', -1e4, 1e4, False, multiple=6),
     Param('scene.spheres', [0.0], 'spheres, 4 numbers each: centre xyz, radius (m); '
-          '[0.0] = none', -1e4, 1e4, False),
+          '[0.0] = none', -1e4, 1e4, False, multiple=4),
     Param('scene.friction', 0.5, 'Coulomb friction coefficient with obstacles', 0.0, 10.0,
           False),
     Param('scene.margin', 0.002, 'distance kept from obstacle surfaces (m)', 0.0, 0.1, False),
-    Param('solver.name', 'multigrid', 'multigrid, hierarchical, explicit, approx or implicit'),
+    Param('solver.name', 'multigrid', 'multigrid, hierarchical, explicit, approx or implicit',
+          choices=('multigrid', 'hierarchical', 'explicit', 'approx', 'implicit')),
     Param('solver.accurate_level', 1, 'multigrid: the finest level solved by BDF2 and '
           'multigrid-CG; finer levels follow eq. 7 (clipped to the finest level)', 0, 9),
-    Param('solver.integrator', 'bdf2', 'multigrid: bdf2 or backward_euler'),
+    Param('solver.integrator', 'bdf2', 'multigrid: bdf2 or backward_euler',
+          choices=('bdf2', 'backward_euler')),
     Param('solver.newton_iterations', 3, 'multigrid: Newton iterations per step', 1, 100),
     Param('solver.cg_iterations', 2, 'multigrid: preconditioned CG iterations per Newton '
           'iteration', 1, 1000),
     Param('solver.external', 'exact', 'gravity outside the filter (exact) or inside it '
-          '(literal, the paper as written)'),
+          '(literal, the paper as written)', choices=('exact', 'literal')),
     Param('solver.strain_limit', 0.1, 'largest spring stretch kept by strain limiting '
           '(0.1 = 10 %; multigrid: on the eq. 7 levels only); 0 switches it off', 0.0, 10.0,
           False),
@@ -123,17 +139,82 @@ def load_file(path):
     raise ValueError(f'{path}: no "ros__parameters" section')
 
 
+def allowed(spec):
+    """Say what values ``spec`` takes, for error messages and descriptors."""
+    kind = _kind(spec.default)
+    text = {'bool': 'true or false', 'str': 'a string', 'float': 'a number',
+            'int': 'an integer', 'float list': 'a list of numbers',
+            'int list': 'a list of integers', 'str list': 'a list of strings'}[kind]
+    if spec.choices:
+        text = 'one of ' + ', '.join(spec.choices)
+    elif spec.low is not None:
+        text += f' in {spec.low:g} .. {spec.high:g}' if 'list' not in kind else \
+            f', each in {spec.low:g} .. {spec.high:g}'
+    if spec.length:
+        text += f', exactly {spec.length}'
+    if spec.multiple:
+        text += f', {spec.multiple} per item'
+    return text
+
+
+def _kind(value):
+    """Return the parameter kind of a default: 'bool', 'int', 'float', 'str' or '<that> list'."""
+    if isinstance(value, list):
+        return f'{_kind(value[0])} list'
+    for name, kind in (('bool', bool), ('int', int), ('float', float), ('str', str)):
+        if isinstance(value, kind):
+            return name
+    raise TypeError(f'no parameter kind for {value!r}')
+
+
+def _kind_fits(want, value):
+    """Whether ``value`` has the kind ``want`` (integers are numbers too)."""
+    if want.endswith(' list'):
+        return (isinstance(value, (list, tuple)) and len(value) > 0
+                and all(_kind_fits(want[:-5], v) for v in value))
+    if want == 'float':
+        return isinstance(value, (int, float)) and not isinstance(value, bool)
+    return _kind(value) == want if isinstance(value, (bool, int, float, str)) else False
+
+
+def check_value(spec, value):
+    """
+    Why ``value`` is not allowed for parameter ``spec``, or None when it is.
+
+    The one check of a value, at start-up and for runtime changes: kind (an integer is
+    accepted where a number is meant), choices, finite and within the range (every
+    element of a list), list length.
+    """
+    kind = _kind(spec.default)
+    problem = None
+    if not _kind_fits(kind, value):
+        problem = 'wrong type'
+    elif spec.choices and value not in spec.choices:
+        problem = 'unknown value'
+    elif spec.low is not None and kind != 'bool':
+        arr = np.atleast_1d(np.asarray(value, dtype=float))
+        if not np.all(np.isfinite(arr)) or arr.min() < spec.low or arr.max() > spec.high:
+            problem = 'out of range'
+    if problem is None and isinstance(value, (list, tuple)):
+        unset = list(value) in ([0.0], [-1])
+        if spec.length and len(value) != spec.length:
+            problem = f'{len(value)} values'
+        elif spec.multiple and not unset and len(value) % spec.multiple:
+            problem = f'{len(value)} values'
+    if problem is None:
+        return None
+    return f'{spec.name} = {value!r}: {problem}; allowed: {allowed(spec)}'
+
+
 def resolve(overrides=None):
-    """Defaults updated by ``overrides``; unknown names and out-of-range values refused."""
+    """Defaults updated by ``overrides``; unknown names and disallowed values refused."""
     values = {p.name: p.default for p in PARAMS}
     for name, value in (overrides or {}).items():
         if name not in PARAM_BY_NAME:
             continue        # node-only parameters (rate, topics, ...) live elsewhere
-        spec = PARAM_BY_NAME[name]
-        if spec.low is not None:
-            arr = np.atleast_1d(np.asarray(value, dtype=float))
-            if not np.all(np.isfinite(arr)) or arr.min() < spec.low or arr.max() > spec.high:
-                raise ValueError(f'{name} = {value!r} outside [{spec.low}, {spec.high}]')
+        reason = check_value(PARAM_BY_NAME[name], value)
+        if reason:
+            raise ValueError(reason)
         values[name] = value
     return values
 

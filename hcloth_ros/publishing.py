@@ -12,6 +12,7 @@ import threading
 import time
 
 from hcloth_ros.ros_msgs import pointcloud2, TriangleMarker
+from visualization_msgs.msg import Marker
 
 
 class ClothPublisher:
@@ -50,6 +51,13 @@ class ClothPublisher:
         if cloud is not None:
             self.cloud_publisher.publish(cloud)
         self.marker_publisher.publish(marker)
+
+    def delete_marker(self, stamp):
+        """Publish the DELETE of the LOD marker (RViz keeps a marker of lifetime 0)."""
+        msg = Marker(ns=self.ns, id=0, action=Marker.DELETE)
+        msg.header.frame_id = self.frame_id
+        msg.header.stamp = stamp
+        self.marker_publisher.publish(msg)
 
 
 class PublishThread:

@@ -4,6 +4,7 @@ Pure conversions between cloth arrays and ROS 2 messages (no node, no graph).
 Kept apart from the node so they can be tested with plain pytest and reused by clients.
 """
 
+from builtin_interfaces.msg import Time
 from geometry_msgs.msg import Point
 import numpy as np
 from sensor_msgs.msg import PointCloud2, PointField
@@ -12,6 +13,16 @@ from visualization_msgs.msg import Marker
 
 _XYZ_FIELDS = [PointField(name=n, offset=4 * i, datatype=PointField.FLOAT32, count=1)
                for i, n in enumerate('xyz')]
+
+
+def sim_stamp(seconds):
+    """
+    Return the ``builtin_interfaces/Time`` of ``seconds`` of simulated time.
+
+    Rounded to the nanosecond from the float: 60 steps of 1/60 s stamp exactly 1 s.
+    """
+    ns = round(seconds * 1e9)
+    return Time(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
 
 
 def pointcloud2(points, frame_id, stamp):

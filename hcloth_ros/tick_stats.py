@@ -56,6 +56,13 @@ class TickStats:
         out['levels_max'] = int(levels.max())
         return out
 
+    def recent(self, ticks):
+        """Return p50/p99 in ms of each phase over the last ``ticks`` ticks ({} if none)."""
+        if ticks <= 0 or not self.count:
+            return {}
+        return {name: _percentiles(np.asarray(self.samples[name])[-ticks:] * 1e3)
+                for name in PHASES}
+
 
 def _percentiles(ms):
     return {'p50': float(np.percentile(ms, 50)), 'p99': float(np.percentile(ms, 99))}

@@ -20,5 +20,6 @@ def jit_warm():
 
 @pytest.fixture
 def lint_paths():
-    """Return the package's Python sources: the product, its tests and its tools."""
-    return [os.path.join(ROOT, p) for p in ('hcloth_ros', 'test', 'tools', 'setup.py')]
+    """Return the package's Python sources: the product, launch files, tests and tools."""
+    return [os.path.join(ROOT, p) for p in ('hcloth_ros', 'launch', 'test', 'tools',
+                                            'setup.py')]

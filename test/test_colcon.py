@@ -41,6 +41,8 @@ def test_colcon_build_installs_a_runnable_sim_node(tmp_path):
     assert os.access(exe, os.X_OK)
     for name in ('hanging.yaml', 'fold.yaml', 'fastdds_large_clouds.xml'):
         assert os.path.exists(os.path.join(prefix, 'share', 'hcloth_ros', 'config', name))
+    for name in ('launch/sim.launch.py', 'rviz/hcloth.rviz'):    # `ros2 launch` finds these
+        assert os.path.isfile(os.path.join(prefix, 'share', 'hcloth_ros', name))
     # the installed executable starts the node and stops cleanly on Ctrl-C
     site = os.path.join(prefix, 'lib', f'python{sys.version_info[0]}.{sys.version_info[1]}',
                         'site-packages')

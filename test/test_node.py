@@ -1,5 +1,7 @@
 """The node in-process: its own context and executor, a subscriber node beside it."""
 
+import os
+import re
 import time
 
 from geometry_msgs.msg import PoseStamped
@@ -282,12 +284,12 @@ def test_simulates_only_consumed_levels_and_refines_without_a_jump():
 
 
 def test_governor_drops_levels_when_ticks_overrun():
-    # at 1000 Hz a 65 x 65 tick (about 1 ms of stepping plus packing) cannot keep up
+    # at 1000 ticks a second a 65 x 65 tick (about 1 ms of stepping plus packing) cannot keep up
     context = rclpy.Context()
     rclpy.init(context=context)
     try:
         sim = ClothSimNode(context=context,
-                           parameter_overrides=[Parameter('rate_hz', value=1000.0),
+                           parameter_overrides=[Parameter('real_time_factor', value=1000 / 60),
                                                 Parameter('lod_level', value=0)])
         probe = rclpy.create_node('probe', context=context)
         probe.create_subscription(PointCloud2, 'cloth/points', lambda m: None,
@@ -333,3 +335,73 @@ def test_unknown_parameters_in_a_params_file_are_reported(tmp_path):
         sim.destroy_node()
     finally:
         rclpy.shutdown(context=context)
+
+
+@pytest.mark.parametrize('graph', [[Parameter('use_sim_time', value=True)]], indirect=True)
+def test_with_use_sim_time_the_node_ticks_and_its_clock_follows_its_clock_topic(graph):
+    # the node is the source of /clock: its timer runs on the steady clock, so it ticks
+    # with use_sim_time too (a timer on ROS time would wait for the time it is to make)
+    sim, _, clouds, _, spin_until, _ = graph
+    assert spin_until(lambda: len(clouds) >= 10)
+    stamp = clouds[-1].header.stamp
+    assert stamp.sec + 1e-9 * stamp.nanosec == pytest.approx(sim.state.time, abs=1 / 30)
+    now = sim.get_clock().now().nanoseconds * 1e-9
+    assert now == pytest.approx(sim.state.time, abs=1 / 30)     # sim time, not wall time
+
+
+@pytest.mark.parametrize('graph', [[Parameter('real_time_factor', value=0.0)]],
+                         indirect=True)
+def test_real_time_factor_zero_runs_as_fast_as_possible_without_governor(graph):
+    sim, _, clouds, _, spin_until, _ = graph
+    assert sim.period == 0.0 and not sim.governor.enabled
+    start, wall = sim.state.time, time.monotonic()
+    spin_until(lambda: False, timeout=1.0)
+    # 65 x 65 steps take about 1-2 ms here: far more than 60 simulated steps a second
+    assert (sim.state.time - start) / (time.monotonic() - wall) > 3.0
+    sim.set_parameters([Parameter('real_time_factor', value=1.0)])
+    assert sim.period == pytest.approx(1 / 60) and sim.governor.enabled
+
+
+def test_rclpy_parameters_are_not_reported_as_unknown():
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    try:
+        sim = ClothSimNode(context=context,
+                           parameter_overrides=[Parameter('use_sim_time', value=True),
+                                                Parameter('cloth.widht', value=2.0)])
+        assert sim._warn_unknown_overrides() == ['cloth.widht']
+        sim.destroy_node()
+    finally:
+        rclpy.shutdown(context=context)
+
+
+def _readme_interfaces():
+    """Return the README's interface table: name -> the text of its type column."""
+    readme = open(os.path.join(os.path.dirname(os.path.dirname(__file__)), 'README.md')).read()
+    rows = re.findall(r'^\| `([^`]+)` \| ([^|]+) \|', readme, flags=re.M)
+    return dict(rows)
+
+
+def test_readme_interface_table_lists_every_topic_and_service(graph):
+    sim, _, _, _, spin_until, _ = graph
+    table = _readme_interfaces()
+    ros_own = ('/rosout', '/parameter_events', '/hcloth_sim/')   # rclpy's, parameter services
+    seen = {}
+
+    def discovered():
+        for lister in (sim.get_publisher_names_and_types_by_node,
+                       sim.get_subscriber_names_and_types_by_node,
+                       sim.get_service_names_and_types_by_node):
+            for name, types in lister('hcloth_sim', '/'):
+                if not name.startswith(ros_own):
+                    seen[name] = types[0]
+        return len(seen) >= 12
+
+    assert spin_until(discovered, timeout=5.0), seen
+    for name, ros_type in seen.items():
+        # relative names are written without the slash, per-gripper ones with <name>
+        row = name if name in ('/clock', '/diagnostics') else name[1:]
+        row = re.sub(r'^cloth/(grippers|obstacles)/[^/]+/', r'cloth/\1/<name>/', row)
+        package, _, message = ros_type.split('/')
+        assert row in table, f'{row} is missing from the README interface table'
+        assert f'`{package}/{message}`' in table[row], (row, ros_type)

@@ -117,7 +117,7 @@ def test_scene_markers_reach_a_late_viewer_and_follow_changes(start_node):
     assert len(box) == 1 and (box[0].scale.y, box[0].scale.z) == pytest.approx((0.6, 0.2))
     # a malformed box is refused with the reason and changes nothing
     bad = sim.set_parameters([Parameter('scene.boxes', value=[0.0, 1.0, 0.5, 0.2, 0.3])])[0]
-    assert not bad.successful and 'multiple of 6' in bad.reason
+    assert not bad.successful and '6 per item' in bad.reason
     bad = sim.set_parameters([Parameter('scene.boxes', value=[0.0, 1.0, 0.5, 0.2, 0.3, -1.0])])[0]
     assert not bad.successful and 'positive' in bad.reason
     assert sim.model.scene.boxes.tolist() == [[0.0, 1.0, 0.5, 0.2, 0.3, 0.1]]

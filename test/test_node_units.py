@@ -274,10 +274,16 @@ def test_unknown_overrides_are_named_and_qos_overrides_are_not():
     assert unknown_overrides(given, known) == ['cloth.widht']
 
 
-def test_descriptors_carry_ranges_of_scalars():
+def test_descriptors_carry_ranges_of_scalars_and_lists():
     spec = {p.name: p for p in params.PARAMS + NODE_PARAMS}
-    rate = descriptor(spec['rate_hz'])
-    assert rate.floating_point_range[0].from_value == 1.0 and rate.read_only
+    rate = descriptor(spec['real_time_factor'])
+    assert rate.floating_point_range[0].to_value == 1000.0 and not rate.read_only
+    boxes = descriptor(spec['scene.boxes'])
+    assert boxes.floating_point_range[0].from_value == -1e4
+    assert boxes.additional_constraints == 'a list of numbers, each in -10000 .. 10000, 6 per item'
+    resolution = descriptor(spec['cloth.resolution'])
+    assert resolution.integer_range[0].to_value == 1025
+    assert resolution.additional_constraints.endswith('exactly 2')
     lod = descriptor(spec['lod_level'])
     assert lod.integer_range[0].to_value == 9 and not lod.read_only
     assert not descriptor(spec['scene.ground']).floating_point_range
