@@ -57,6 +57,7 @@ The node is wiring: the units it wires are ROS-free and tested on their own
 import gc
 import json
 import sys
+import threading
 import time
 
 from diagnostic_msgs.msg import DiagnosticArray
@@ -146,8 +147,9 @@ class ClothSimNode(Node):
                                                       qos_overriding_options=overridable)
         self._sender = None
         self._sends_seen = 0
+        self.bag = self._make_bag()
         if self.get_parameter('publish_thread').value:
-            self._sender = PublishThread(self.publisher.publish, self._on_send_error)
+            self._sender = PublishThread(self._send, self._on_send_error)
         self.paused = False
         self.create_service(Trigger, 'cloth/reset', self._on_reset)
         self.create_service(SetBool, 'cloth/pause', self._on_pause)
@@ -279,14 +281,76 @@ class ClothSimNode(Node):
         ``'obstacles'`` (the static ones) or ``'bodies'`` (a moving one moved). The markers
         always hold the whole scene: the topic keeps only its last message for late viewers.
         """
-        self._scene_publisher.publish(scene_markers(
-            self.model.scene, self.control.bodies, self.frame_id, sim_stamp(self.state.time)))
+        self._scene_message = scene_markers(self.model.scene, self.control.bodies,
+                                            self.frame_id, sim_stamp(self.state.time))
+        self._scene_publisher.publish(self._scene_message)
+        if getattr(self, 'bag', None) is not None:
+            self._bag_scene()
         if getattr(self, 'recorder', None) is None:
             return
         if changed == 'obstacles':
             self.recorder.log_obstacles(self.model.scene, self.state.time)
         else:
             self.recorder.log_bodies(self.control.bodies, self.state.time)
+
+    def _make_bag(self):
+        """Open the MCAP bag of ``bag_path`` and register the node's topics (None: no bag)."""
+        path = self.get_parameter('bag_path').value
+        if not path:
+            return None
+        from hcloth_ros.bag import BagWriter
+        try:
+            bag = BagWriter(path)
+        except (OSError, ValueError) as e:
+            raise StartupError([f'bag_path {path!r}: {e}']) from None
+        self._bag_lock = threading.Lock()     # the timer's and the sending thread write
+        self._bag_offset = 0     # ns: log times go on across resets (stamps start again)
+        self._bag_topics = {name: self.resolve_topic_name(name) for name in
+                            ('cloth/points', 'cloth/lod_marker', 'cloth/scene', '/clock')}
+        topics = self._bag_topics
+        bag.add_topic(topics['cloth/points'], PointCloud2, qos='best_effort', depth=5)
+        bag.add_topic(topics['cloth/lod_marker'], Marker)
+        bag.add_topic(topics['cloth/scene'], MarkerArray, transient_local=True, depth=1)
+        bag.add_topic(topics['/clock'], ClockMsg, depth=1)
+        self.publisher.always_cloud = True      # the bag wants every level
+        self.get_logger().info(f'recording cloth/points, cloth/lod_marker, cloth/scene and '
+                               f'/clock to {path}')
+        return bag
+
+    def _bag_write(self, messages, seconds):
+        """
+        Write ``(topic, message)`` pairs at ``seconds`` of sim time to the bag, if any.
+
+        A failed write (disk full) closes the bag with one error; the simulation goes on.
+        """
+        if self.bag is None:
+            return
+        with self._bag_lock:
+            try:
+                for topic, msg in messages:
+                    if msg is not None:
+                        self.bag.write(self._bag_topics[topic], msg,
+                                       round(seconds * 1e9) + self._bag_offset)
+            except (OSError, ValueError) as e:
+                self.get_logger().error(f'bag {self.bag.path}: {e}; bag closed, the '
+                                        'simulation goes on')
+                self._close_bag()
+
+    def _close_bag(self):
+        bag, self.bag = self.bag, None
+        try:
+            bag.close()
+        except (OSError, ValueError) as e:
+            self.get_logger().error(f'bag {bag.path}: closing failed: {e}')
+
+    def _bag_scene(self):
+        if self.bag is not None:
+            self._bag_write([('cloth/scene', self._scene_message)], self.state.time)
+
+    def _send(self, cloud, marker, seconds):
+        """Publish a tick's cloud and marker; write them to the bag too."""
+        self.publisher.publish(cloud, marker)
+        self._bag_write([('cloth/points', cloud), ('cloth/lod_marker', marker)], seconds)
 
     def _make_recorder(self):
         path, url = self.get_parameter('rerun_path').value, self.get_parameter('rerun_url').value
@@ -376,6 +440,8 @@ class ClothSimNode(Node):
         return sorted(self._reported_unknown)
 
     def _on_reset(self, request, response):
+        if self.bag is not None:
+            self._bag_offset += round((self.state.time - self.initial.time) * 1e9)
         self.state.assign(self.initial)
         self.control.release_all()
         self.control.bodies.commit()    # obstacles stay where they are, at rest
@@ -499,7 +565,9 @@ class ClothSimNode(Node):
                 break
         self.report = report
         stamp = sim_stamp(self.state.time)
-        self._clock_publisher.publish(ClockMsg(clock=stamp))
+        clock = ClockMsg(clock=stamp)
+        self._clock_publisher.publish(clock)
+        self._bag_write([('/clock', clock)], self.state.time)
         if moved:
             self._show_scene('bodies')
         t1 = time.perf_counter()
@@ -511,7 +579,7 @@ class ClothSimNode(Node):
             cloud, marker = self.publisher.pack(self.state, finest, lod, stamp)
         t2 = time.perf_counter()
         if self._sender is None:
-            self.publisher.publish(cloud, marker)
+            self._send(cloud, marker, self.state.time)
         t3 = time.perf_counter()
         if self.recorder is not None:
             self.recorder.log_step(self.state, finest, lod, report, t3 - t0,
@@ -521,7 +589,7 @@ class ClothSimNode(Node):
             # after the recorder: its Python would wait for the GIL the sending thread
             # holds (recording, 16k points: record 1.1-1.5 -> 2.7-3.1 ms p50 when sent
             # before it); from here the send overlaps the next step's kernels instead
-            self._sender.submit(cloud, marker)
+            self._sender.submit(cloud, marker, self.state.time)
         t5 = time.perf_counter()
         self.stats.add(step=t1 - t0, pack=t2 - t1b, publish=(t1b - t1) + (t3 - t2) + (t5 - t4),
                        send=sent, record=t4 - t3, tick=t5 - t0, levels=finest + 1,
@@ -601,6 +669,8 @@ class ClothSimNode(Node):
             self._sender = None
         if getattr(self, '_scene_publisher', None) is not None and self.context.ok():
             self._delete_markers()
+        if getattr(self, 'bag', None) is not None:
+            self._close_bag()
         if getattr(self, 'stats', None) is not None and self.stats.count:
             self.get_logger().info(f'tick stats {json.dumps(self.stats.summary())}')
         if getattr(self, 'recorder', None) is not None:

@@ -32,9 +32,10 @@ class ClothPublisher:
         self.ns = ns
         self._markers = {}      # level -> TriangleMarker, built on first use
         self._cloud_points = None   # float32 buffer of the last cloud's points
+        self.always_cloud = False   # pack the cloud with no subscriber (a bag records it)
 
     def cloud_wanted(self):
-        return self.cloud_publisher.get_subscription_count() > 0
+        return self.always_cloud or self.cloud_publisher.get_subscription_count() > 0
 
     def pack(self, state, finest, lod, stamp):
         """Return ``(cloud or None, marker)`` of levels ``finest`` and ``lod``."""

@@ -205,3 +205,49 @@ def test_an_integer_for_a_float_starts(tmp_path):
     finally:
         proc.send_signal(signal.SIGINT)
         assert proc.wait(timeout=10) == 0
+
+
+def test_bag_holds_the_node_topics_in_sim_time(tmp_path):
+    from mcap_ros2.reader import read_ros2_messages
+    bag = tmp_path / 'run.mcap'
+    domain = random.randint(100, 200)
+    env = dict(os.environ, ROS_DOMAIN_ID=str(domain), PYTHONUNBUFFERED='1')
+    proc = subprocess.Popen([EXE, '--ros-args', '-p', f'bag_path:={bag}'], env=env,
+                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    client = Client(domain)
+    try:
+        # no subscriber needed: the bag wants the cloud and every level
+        assert client.spin_until(lambda: len(client.clocks) >= 40, timeout=120)
+        reply = client.call(Trigger, 'cloth/reset', Trigger.Request())
+        assert reply.success
+        client.clocks.clear()
+        assert client.spin_until(lambda: len(client.clocks) >= 20)
+    finally:
+        client.close()
+        proc.send_signal(signal.SIGINT)
+        assert proc.wait(timeout=10) == 0, proc.stdout.read()
+    read = {}
+    for m in read_ros2_messages(str(bag)):
+        read.setdefault(m.channel.topic, []).append(m)
+    assert set(read) == {'/cloth/points', '/cloth/lod_marker', '/cloth/scene', '/clock'}
+    clocks = read['/clock']
+    log_times = np.array([m.log_time_ns for m in clocks])
+    sim_times = np.array([_seconds(m.ros_msg.clock) for m in clocks])
+    # one /clock a tick; after the reset the stamps start again at dt while the bag's log
+    # time goes on, so `ros2 bag play` replays the run in order
+    assert np.all(np.diff(log_times) > 0)
+    restart = int(np.argmin(np.diff(sim_times))) + 1
+    assert sim_times[restart] == pytest.approx(DT, abs=2e-9) and sim_times[restart - 1] > 0.5
+    steps = np.diff(log_times) * 1e-9
+    assert np.allclose(steps, DT, atol=2e-9)
+    clouds = read['/cloth/points']
+    assert len(clouds) >= len(clocks) - 2      # the last tick's send may not have run
+    for m in clouds:
+        assert m.log_time_ns in set(log_times.tolist())
+    last = clouds[-1]
+    pts = np.frombuffer(bytes(last.ros_msg.data), dtype='<f4').reshape(-1, 3)
+    assert pts.shape == (65 * 65, 3) and np.all(np.isfinite(pts))
+    # the default scene: what was drawn before cleared, then the ground alone
+    scene = read['/cloth/scene'][0].ros_msg.markers
+    assert [(m.action, m.type) for m in scene[1:]] == [(Marker.ADD, Marker.CUBE)]
+    assert scene[0].action == Marker.DELETEALL
