@@ -196,19 +196,27 @@ class ClothSimNode(Node):
             raise StartupError([f'parameter {line}' for line in problems])
 
     def _check_params_files(self, cli_args):
-        """Report a params file with no section for this node (rcl ignores it silently)."""
+        """
+        Report a params file with no section for this node (rcl ignores it silently).
+
+        Returns the paths reported.
+        """
         fqn = self.get_fully_qualified_name()
+        reported = []
         for path in params_files(sys.argv + list(cli_args or [])):
             try:
                 matched = sections_for(path, fqn)
             except (OSError, ValueError) as e:      # yaml.YAMLError is a ValueError
                 self.get_logger().error(f'params file {path}: cannot read it: {e}')
+                reported.append(path)
                 continue
             if not matched:
+                reported.append(path)
                 self.get_logger().error(
                     f'params file {path} has no section for node {fqn} (keys it would '
                     f'match: /**, {fqn} or {fqn.rsplit("/", 1)[1]} in the root namespace): '
                     'none of its values are used')
+        return reported
 
     def _declared_types(self, changes):
         """Pre-set callback: an integer given for a float parameter becomes a float."""

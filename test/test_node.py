@@ -405,3 +405,21 @@ def test_readme_interface_table_lists_every_topic_and_service(graph):
         package, _, message = ros_type.split('/')
         assert row in table, f'{row} is missing from the README interface table'
         assert f'`{package}/{message}`' in table[row], (row, ros_type)
+
+
+def test_a_params_file_for_another_node_is_reported(tmp_path):
+    other = tmp_path / 'other.yaml'
+    other.write_text('cloth_sim:\n  ros__parameters:\n    cloth:\n      width: 2.0\n')
+    mine = tmp_path / 'mine.yaml'
+    mine.write_text('/**:\n  ros__parameters:\n    cloth:\n      height: 0.5\n')
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    try:
+        args = ['--ros-args', '--params-file', str(other), '--params-file', str(mine)]
+        sim = ClothSimNode(context=context, cli_args=args)
+        assert sim._check_params_files(args) == [str(other)]
+        assert sim.get_parameter('cloth.width').value == 1.0     # rcl ignored that file
+        assert sim.get_parameter('cloth.height').value == 0.5
+        sim.destroy_node()
+    finally:
+        rclpy.shutdown(context=context)
