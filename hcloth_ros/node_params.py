@@ -26,8 +26,9 @@ NODE_PARAMS = [
     Param('rerun_path', '', 'record the run to this .rrd file; empty: no recording'),
     Param('rerun_url', '', 'stream to a running Rerun viewer at this url instead '
           '(e.g. rerun+http://127.0.0.1:9876/proxy); empty: none'),
-    Param('rerun_finest_every', 1, 'log the finest mesh every N ticks (the LOD mesh '
-          'and metrics every tick)', 1, 10000),
+    Param('rerun_finest_every', 30, 'log the finest mesh every N ticks (the LOD mesh '
+          'and metrics every tick); 30 keeps 10 minutes of the default scene near 220 MB',
+          1, 10000),
     Param('numba_threads', 1, 'threads of the numba kernels (capped at the cores); 1 '
           'gave the lowest tail latency with subscribers on the same 2 cores', 1, 256),
     Param('grasp_radius', 0.03, 'a closing gripper takes the points this close (m)',

@@ -1,13 +1,14 @@
 """
 A stand-in robot that folds the cloth, using only sim_node's public topics.
 
-It waits for ``cloth/points``, finds the two corners nearest the viewer (smallest y, at the
-smallest and largest x), sends grippers ``left`` and ``right`` there, closes them, carries
-the corners over the fold line (the middle of the cloth along y) onto the far edge and lets
-go, then exits. The corners travel on a half ellipse round the fold line, as wide as the
-near half is long and ``LIFT`` high, so they are never farther from the fold line than
-the cloth between reaches: carried up and straight over, they pulled the whole cloth
-along (its far edge 1 m).
+It runs on the simulation's clock (``/clock``). It waits for ``cloth/points``, finds
+the two corners nearest the viewer (smallest y, at the smallest and largest x), sends
+grippers ``left`` and ``right`` there, closes them, carries the corners over the fold line
+(the middle of the cloth along y) onto the far edge and lets go, then exits. The corners
+travel on a half ellipse round the fold line, as wide as the near half is long and
+``LIFT`` high, so they are never farther from the fold line than the cloth between
+reaches: carried up and straight over, they pulled the whole cloth along (its far edge
+1 m).
 """
 
 import sys
@@ -18,6 +19,7 @@ import numpy as np
 import rclpy
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
+from rclpy.parameter import Parameter
 from rclpy.qos import qos_profile_sensor_data
 from sensor_msgs.msg import PointCloud2
 from std_msgs.msg import Bool
@@ -49,7 +51,10 @@ def fold_offset(start, far_y, t):
 class FoldClient(Node):
 
     def __init__(self):
-        super().__init__('hcloth_fold_client')
+        # on the simulation's clock: the path is the same in simulated time however fast
+        # the machine steps (on wall time a slow tick made the grippers jump ahead)
+        super().__init__('hcloth_fold_client',
+                         parameter_overrides=[Parameter('use_sim_time', value=True)])
         self.pose_pubs = {n: self.create_publisher(PoseStamped, f'cloth/grippers/{n}/pose', 10)
                           for n in ('left', 'right')}
         self.close_pubs = {n: self.create_publisher(Bool, f'cloth/grippers/{n}/close', 10)
@@ -82,7 +87,9 @@ class FoldClient(Node):
     def _tick(self):
         if self.starts is None or self.done:
             return
-        now = self.get_clock().now().nanoseconds * 1e-9
+        now = self.get_clock().now().nanoseconds * 1e-9     # simulated seconds
+        if now == 0.0:
+            return      # no /clock yet: a start at 0 would skip the path ahead later
         if self.t0 is None:
             self.t0 = now
             for name, start in self.starts.items():

@@ -35,7 +35,9 @@ def main(argv=None):
     args = parser.parse_args(argv)
     os.makedirs(os.path.dirname(os.path.abspath(args.out)), exist_ok=True)
     node_cmd = [sim_node_path(), '--ros-args', '--params-file', args.scene,
-                '-p', f'rerun_path:={os.path.abspath(args.out)}']
+                '-p', f'rerun_path:={os.path.abspath(args.out)}',
+                # a short run: every finest mesh (the fold measures read the last one)
+                '-p', 'rerun_finest_every:=1']
     print('[demo] starting', ' '.join(node_cmd), flush=True)
     node = subprocess.Popen(node_cmd)
     try:
