@@ -16,9 +16,10 @@ def node_status(name, stamp, recent, real_time_factor, target_factor, paused, le
     Return a ``DiagnosticArray`` with one status for the simulation node ``name``.
 
     ``recent``: :meth:`TickStats.recent` over the last period (ms); ``real_time_factor``:
-    simulated over wall seconds over that period; ``target_factor``: the one asked for
-    (0: as fast as possible); ``governor_cap``: the finest level the governor allows, None
-    when it is off; ``refused``: why the last step was refused, None if it went through.
+    simulated over wall seconds over that period (None when a reset sent the time back in
+    it); ``target_factor``: the one asked for (0: as fast as possible); ``governor_cap``:
+    the finest level the governor allows, None when it is off; ``refused``: why the last
+    step was refused, None if it went through.
     The level is ERROR after a refused step, WARN while running slower than asked or with
     levels shed by the governor, else OK (paused included).
     """
@@ -28,11 +29,13 @@ def node_status(name, stamp, recent, real_time_factor, target_factor, paused, le
     elif governor_cap is not None and governor_cap < level_count - 1:
         level, message = DiagnosticStatus.WARN, (
             f'governor sheds levels: simulating up to level {governor_cap}')
-    elif not paused and target_factor > 0 and real_time_factor < SLOW * target_factor:
+    elif (not paused and target_factor > 0 and real_time_factor is not None
+          and real_time_factor < SLOW * target_factor):
         level, message = DiagnosticStatus.WARN, (
             f'slower than asked: real-time factor {real_time_factor:.2f} of {target_factor:g}')
     values = {'paused': str(paused).lower(), 'sim_time_s': f'{sim_time:.6f}',
-              'real_time_factor': f'{real_time_factor:.3f}',
+              'real_time_factor': (f'{real_time_factor:.3f}' if real_time_factor is not None
+                                   else 'n/a'),
               'real_time_factor_target': f'{target_factor:g}',
               'levels_simulated': str(levels), 'level_count': str(level_count),
               'governor_cap': 'off' if governor_cap is None else str(governor_cap)}

@@ -63,15 +63,24 @@ def install_signal_handlers():
 
 
 def unreadable_params_files(argv):
-    """One line for each ``--params-file`` of ``argv`` that cannot be read as YAML."""
-    from hcloth_ros.node_params import params_files
+    """
+    One line for each ROS argument of ``argv`` rcl would refuse with its own internals.
+
+    A ``--params-file`` that cannot be read as YAML, and lists mixing integers and
+    decimal numbers (``[0, 0, 0.5]``) in a params file or a ``-p`` override: rcl wants one
+    type per list and says so without naming the parameter.
+    """
+    from hcloth_ros.node_params import mixed_lists, overrides_in, params_files
     lines = []
     for path in params_files(argv):
         try:
             with open(path) as f:
-                yaml.safe_load(f)
+                doc = yaml.safe_load(f)
         except (OSError, yaml.YAMLError) as e:
             lines.append(f'cannot start: params file {path}: {" ".join(str(e).split())}')
+            continue
+        lines += [f'cannot start: params file {path}: {line}' for line in mixed_lists(doc)]
+    lines += [f'cannot start: -p {line}' for line in mixed_lists(overrides_in(argv))]
     return lines
 
 

@@ -56,6 +56,7 @@ The node is wiring: the units it wires are ROS-free and tested on their own
 
 import gc
 import json
+import os
 import sys
 import threading
 import time
@@ -84,7 +85,7 @@ from rcl_interfaces.msg import SetParametersResult
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from rclpy.parameter import Parameter
-from rclpy.qos import DurabilityPolicy, qos_profile_sensor_data, QoSProfile
+from rclpy.qos import DurabilityPolicy, qos_profile_sensor_data, QoSProfile, ReliabilityPolicy
 from rclpy.qos_overriding_options import QoSOverridingOptions
 from rosgraph_msgs.msg import Clock as ClockMsg
 from sensor_msgs.msg import PointCloud2
@@ -109,6 +110,7 @@ class ClothSimNode(Node):
         super().__init__('hcloth_sim', **kwargs)
         self._check_overrides()
         self._check_params_files(kwargs.get('cli_args'))
+        self._check_output_paths()
         self.add_pre_set_parameters_callback(self._declared_types)
         self.add_on_set_parameters_callback(self._check_parameters)
         for spec in ALL_PARAMS:
@@ -121,8 +123,11 @@ class ClothSimNode(Node):
         except ValueError as e:     # combinations the table cannot state (parallel axes)
             raise StartupError([f'the scene cannot be built: {e}']) from None
         self._next_scene = None     # checked, applied once the whole batch is accepted
-        self.obstacles = ObstacleBank(self.get_parameter('scene.moving_obstacles').value,
-                                      self.control.bodies, values['scene.friction'])
+        try:
+            self.obstacles = ObstacleBank(self.get_parameter('scene.moving_obstacles').value,
+                                          self.control.bodies, values['scene.friction'])
+        except ValueError as e:
+            raise StartupError([f'parameter scene.moving_obstacles: {e}']) from None
         # multi-level solvers simulate levels on demand and publish any level of detail
         self._levelled = isinstance(self.solver, HierarchicalSolver)
         self.initial = self.state.copy()
@@ -147,7 +152,9 @@ class ClothSimNode(Node):
                                                       qos_overriding_options=overridable)
         self._sender = None
         self._sends_seen = 0
-        self.bag = self._make_bag()
+        self.bag = None         # made last: a start refused later leaves no file behind
+        self._bag_lock = threading.Lock()     # the timer's and the sending thread write
+        self._bag_offset = 0    # ns: bag times go on across resets (the stamps start again)
         if self.get_parameter('publish_thread').value:
             self._sender = PublishThread(self._send, self._on_send_error)
         self.paused = False
@@ -160,6 +167,8 @@ class ClothSimNode(Node):
         if self.recorder is not None:
             self.recorder.log_obstacles(self.model.scene, self.state.time)
             self.recorder.log_bodies(self.control.bodies, self.state.time)
+        self.bag = self._make_bag()
+        self._bag_scene()
         self.stats = TickStats()
         self.report = None      # the last step's report
         # the node is the source of /clock: its timers run on the steady clock, so that
@@ -217,6 +226,28 @@ class ClothSimNode(Node):
                     f'match: /**, {fqn} or {fqn.rsplit("/", 1)[1]} in the root namespace): '
                     'none of its values are used')
         return reported
+
+    def _check_output_paths(self):
+        """
+        Refuse recording paths that cannot be written before the kernels are warmed.
+
+        Found later, a bad path ended the start after seconds of warm-up, with the
+        recording library's own warnings beside the error.
+        """
+        problems = []
+        for name in ('rerun_path', 'bag_path'):
+            given = self._parameter_overrides.get(name)
+            path = given.value if given is not None else ''
+            if not isinstance(path, str) or not path:
+                continue
+            folder = os.path.dirname(os.path.abspath(path))
+            if not os.path.isdir(folder) or not os.access(folder, os.W_OK):
+                problems.append(f'parameter {name} = {path!r}: cannot write in {folder}')
+            elif name == 'bag_path' and os.path.exists(path):
+                problems.append(f'parameter bag_path = {path!r}: the file exists (a bag is '
+                                'never overwritten)')
+        if problems:
+            raise StartupError(problems)
 
     def _declared_types(self, changes):
         """Pre-set callback: an integer given for a float parameter becomes a float."""
@@ -310,13 +341,14 @@ class ClothSimNode(Node):
         try:
             bag = BagWriter(path)
         except (OSError, ValueError) as e:
-            raise StartupError([f'bag_path {path!r}: {e}']) from None
-        self._bag_lock = threading.Lock()     # the timer's and the sending thread write
-        self._bag_offset = 0     # ns: log times go on across resets (stamps start again)
+            raise StartupError([f'parameter bag_path = {path!r}: {e}']) from None
         self._bag_topics = {name: self.resolve_topic_name(name) for name in
                             ('cloth/points', 'cloth/lod_marker', 'cloth/scene', '/clock')}
         topics = self._bag_topics
-        bag.add_topic(topics['cloth/points'], PointCloud2, qos='best_effort', depth=5)
+        cloud_qos = self.publisher.cloud_publisher.qos_profile     # overrides included
+        bag.add_topic(topics['cloth/points'], PointCloud2, depth=cloud_qos.depth,
+                      qos='reliable' if cloud_qos.reliability == ReliabilityPolicy.RELIABLE
+                      else 'best_effort')
         bag.add_topic(topics['cloth/lod_marker'], Marker)
         bag.add_topic(topics['cloth/scene'], MarkerArray, transient_local=True, depth=1)
         bag.add_topic(topics['/clock'], ClockMsg, depth=1)
@@ -325,49 +357,59 @@ class ClothSimNode(Node):
                                f'/clock to {path}')
         return bag
 
-    def _bag_write(self, messages, seconds):
+    def _bag_time(self):
+        """Return the bag's time of now (ns): sim time, carried on across resets."""
+        return round(self.state.time * 1e9) + self._bag_offset
+
+    def _bag_write(self, messages, bag_ns):
         """
-        Write ``(topic, message)`` pairs at ``seconds`` of sim time to the bag, if any.
+        Write ``(topic, message)`` pairs at ``bag_ns`` (:meth:`_bag_time`) to the bag, if any.
 
         A failed write (disk full) closes the bag with one error; the simulation goes on.
+        The time is taken in the tick, not here: a reset during a send must not move it.
         """
-        if self.bag is None:
-            return
         with self._bag_lock:
+            if self.bag is None:
+                return
             try:
                 for topic, msg in messages:
                     if msg is not None:
-                        self.bag.write(self._bag_topics[topic], msg,
-                                       round(seconds * 1e9) + self._bag_offset)
+                        self.bag.write(self._bag_topics[topic], msg, bag_ns)
             except (OSError, ValueError) as e:
                 self.get_logger().error(f'bag {self.bag.path}: {e}; bag closed, the '
                                         'simulation goes on')
-                self._close_bag()
+                self._close_bag(quietly=True)
 
-    def _close_bag(self):
+    def _close_bag(self, quietly=False):
+        """Finish the bag (call with the bag lock held); ``quietly``: after a failed write."""
         bag, self.bag = self.bag, None
         try:
             bag.close()
         except (OSError, ValueError) as e:
-            self.get_logger().error(f'bag {bag.path}: closing failed: {e}')
+            if not quietly:     # the failed write was reported: one error, not two
+                self.get_logger().error(f'bag {bag.path}: closing failed: {e}')
 
     def _bag_scene(self):
-        if self.bag is not None:
-            self._bag_write([('cloth/scene', self._scene_message)], self.state.time)
+        self._bag_write([('cloth/scene', self._scene_message)], self._bag_time())
 
-    def _send(self, cloud, marker, seconds):
+    def _send(self, cloud, marker, bag_ns):
         """Publish a tick's cloud and marker; write them to the bag too."""
         self.publisher.publish(cloud, marker)
-        self._bag_write([('cloth/points', cloud), ('cloth/lod_marker', marker)], seconds)
+        self._bag_write([('cloth/points', cloud), ('cloth/lod_marker', marker)], bag_ns)
 
     def _make_recorder(self):
         path, url = self.get_parameter('rerun_path').value, self.get_parameter('rerun_url').value
         if not (path or url):
             return None
         from hcloth_ros.recorder import Recorder
+        try:
+            recorder = Recorder(self.model, path=path, url=url,
+                                finest_every=self.get_parameter('rerun_finest_every').value)
+        except (RuntimeError, OSError, ValueError) as e:    # rerun: "Failed to create file"
+            name = 'rerun_path' if path else 'rerun_url'
+            raise StartupError([f'parameter {name} = {path or url!r}: {e}']) from None
         self.get_logger().info(f'recording to {path or url}')
-        return Recorder(self.model, path=path, url=url,
-                        finest_every=self.get_parameter('rerun_finest_every').value)
+        return recorder
 
     def _warn_unknown_overrides(self):
         # rclpy has no public accessor for the overrides it was given
@@ -448,12 +490,12 @@ class ClothSimNode(Node):
         return sorted(self._reported_unknown)
 
     def _on_reset(self, request, response):
-        if self.bag is not None:
-            self._bag_offset += round((self.state.time - self.initial.time) * 1e9)
+        self._bag_offset += round((self.state.time - self.initial.time) * 1e9)
         self.state.assign(self.initial)
         self.control.release_all()
         self.control.bodies.commit()    # obstacles stay where they are, at rest
         self.grippers.forget_grasps()
+        self._publish_clock()           # time goes back now, paused or not
         response.success = True
         response.message = ('cloth reset to its initial state and time 0, every grasp '
                             'released' + (' (paused: cloth/step advances it)'
@@ -482,11 +524,12 @@ class ClothSimNode(Node):
             response.message = 'not paused: call cloth/pause with true first'
             return response
         self._tick()
-        if self._sender is not None:
-            self._sender.wait(timeout=1.0)
-        response.success = self.report is None or self.report.ok
+        sent = self._sender is None or self._sender.wait(timeout=1.0)
+        response.success = sent and (self.report is None or self.report.ok)
         response.message = f'stepped to t = {self.state.time:.6f} s'
-        if not response.success:
+        if not sent:
+            response.message += ' (its messages were not sent within 1 s)'
+        elif not response.success:
             response.message += f' ({self.report.reason})'
         return response
 
@@ -527,10 +570,12 @@ class ClothSimNode(Node):
         ticks, sim, wall = self.stats.count, self.state.time, time.monotonic()
         last_ticks, last_sim, last_wall = self._diagnosed
         self._diagnosed = (ticks, sim, wall)
+        # a reset in the window sends sim time back: no factor for that window
+        factor = (sim - last_sim) / (wall - last_wall) if sim >= last_sim and wall > last_wall \
+            else None
         self._diagnostics.publish(node_status(
             self.get_fully_qualified_name(), sim_stamp(sim),
-            recent=self.stats.recent(ticks - last_ticks),
-            real_time_factor=(sim - last_sim) / (wall - last_wall) if wall > last_wall else 0.0,
+            recent=self.stats.recent(ticks - last_ticks), real_time_factor=factor,
             target_factor=self.get_parameter('real_time_factor').value, paused=self.paused,
             levels=len(self.solver.levels()), level_count=self.model.level_count,
             governor_cap=self.governor.cap if self.governor.enabled else None,
@@ -572,10 +617,8 @@ class ClothSimNode(Node):
             if not report.ok:
                 break
         self.report = report
-        stamp = sim_stamp(self.state.time)
-        clock = ClockMsg(clock=stamp)
-        self._clock_publisher.publish(clock)
-        self._bag_write([('/clock', clock)], self.state.time)
+        stamp = self._publish_clock()
+        bag_ns = self._bag_time()
         if moved:
             self._show_scene('bodies')
         t1 = time.perf_counter()
@@ -587,7 +630,7 @@ class ClothSimNode(Node):
             cloud, marker = self.publisher.pack(self.state, finest, lod, stamp)
         t2 = time.perf_counter()
         if self._sender is None:
-            self._send(cloud, marker, self.state.time)
+            self._send(cloud, marker, bag_ns)
         t3 = time.perf_counter()
         if self.recorder is not None:
             self.recorder.log_step(self.state, finest, lod, report, t3 - t0,
@@ -597,13 +640,21 @@ class ClothSimNode(Node):
             # after the recorder: its Python would wait for the GIL the sending thread
             # holds (recording, 16k points: record 1.1-1.5 -> 2.7-3.1 ms p50 when sent
             # before it); from here the send overlaps the next step's kernels instead
-            self._sender.submit(cloud, marker, self.state.time)
+            self._sender.submit(cloud, marker, bag_ns)
         t5 = time.perf_counter()
         self.stats.add(step=t1 - t0, pack=t2 - t1b, publish=(t1b - t1) + (t3 - t2) + (t5 - t4),
                        send=sent, record=t4 - t3, tick=t5 - t0, levels=finest + 1,
                        sim_time=self.state.time)
         if self.period > 0:
             self._govern(t5 - t0)
+
+    def _publish_clock(self):
+        """Publish (and bag) the simulation's time on /clock; return its stamp."""
+        stamp = sim_stamp(self.state.time)
+        clock = ClockMsg(clock=stamp)
+        self._clock_publisher.publish(clock)
+        self._bag_write([('/clock', clock)], self._bag_time())
+        return stamp
 
     def _wait_for_sender(self):
         """
@@ -678,7 +729,8 @@ class ClothSimNode(Node):
         if getattr(self, '_scene_publisher', None) is not None and self.context.ok():
             self._delete_markers()
         if getattr(self, 'bag', None) is not None:
-            self._close_bag()
+            with self._bag_lock:    # a send the thread gave up waiting for may still write
+                self._close_bag()
         if getattr(self, 'stats', None) is not None and self.stats.count:
             self.get_logger().info(f'tick stats {json.dumps(self.stats.summary())}')
         if getattr(self, 'recorder', None) is not None:

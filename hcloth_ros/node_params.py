@@ -151,6 +151,43 @@ def params_files(argv):
     return files
 
 
+def overrides_in(argv):
+    """Return the ``-p name:=value`` overrides of the ROS arguments in ``argv`` (YAML values)."""
+    out, ros = {}, False
+    for i, arg in enumerate(argv):
+        if arg == '--ros-args':
+            ros = True
+        elif arg == '--':
+            ros = False
+        elif ros and arg in ('-p', '--param') and i + 1 < len(argv) and ':=' in argv[i + 1]:
+            name, _, text = argv[i + 1].partition(':=')
+            try:
+                out[name] = yaml.safe_load(text)
+            except yaml.YAMLError:
+                out[name] = text    # rcl reads it as a string
+    return out
+
+
+def mixed_lists(tree, prefix=''):
+    """
+    Return a line for each list in ``tree`` that mixes integers and decimal numbers.
+
+    rcl refuses such a list (``Sequence should be of same type``) without naming it.
+    """
+    lines = []
+    if isinstance(tree, dict):
+        for key, value in tree.items():
+            name = key if key == 'ros__parameters' or not prefix else f'{prefix}.{key}'
+            lines += mixed_lists(value, '' if key == 'ros__parameters' else name)
+    elif isinstance(tree, list):
+        kinds = {type(v) for v in tree} & {int, float}
+        if len(kinds) == 2:
+            fixed = [float(v) if type(v) is int else v for v in tree]
+            lines.append(f'{prefix} = {tree}: mixes integers and decimal numbers, which rcl '
+                         f'refuses; write them all as decimals: {fixed}')
+    return lines
+
+
 def _key_pattern(key):
     """Return a params file's node key (``/**``, ``/ns/name``, ``name``, ``*``) as a regex."""
     key = key if key.startswith('/') else '/' + key

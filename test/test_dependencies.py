@@ -84,9 +84,16 @@ def test_every_import_has_a_known_key():
     assert imported() - set(KEYS) == set(), 'add the new imports to KEYS and declare them'
 
 
-def test_package_xml_declares_exactly_what_is_imported():
-    wanted = {KEYS[name][0] for name in imported()}
+# run, not imported: the executables the launch file starts besides the node
+LAUNCHED = {'rviz2'}
+
+
+def test_package_xml_declares_exactly_what_is_imported_or_launched():
+    wanted = {KEYS[name][0] for name in imported()} | LAUNCHED
     assert package_xml_keys('exec_depend') == wanted
+    with open(os.path.join(ROOT, 'launch', 'sim.launch.py')) as f:
+        launch = f.read()
+    assert all(f"executable='{exe}'" in launch for exe in LAUNCHED)
 
 
 def test_setup_py_requires_every_pip_import():

@@ -423,3 +423,28 @@ def test_a_params_file_for_another_node_is_reported(tmp_path):
         sim.destroy_node()
     finally:
         rclpy.shutdown(context=context)
+
+
+class _FullDisk:
+    """A bag whose writes fail as on a full disk."""
+
+    path = 'full.mcap'
+    closed = False
+
+    def write(self, topic, msg, stamp_ns):
+        raise OSError(28, 'No space left on device')
+
+    def close(self):
+        self.closed = True
+        raise OSError(28, 'No space left on device')
+
+
+def test_a_failed_bag_write_closes_the_bag_and_the_simulation_goes_on(graph):
+    sim, _, clouds, _, spin_until, _ = graph
+    assert spin_until(lambda: len(clouds) >= 2)
+    sim.bag = full = _FullDisk()
+    sim._bag_topics = {name: name for name in ('cloth/points', 'cloth/lod_marker',
+                                               'cloth/scene', '/clock')}
+    count = len(clouds)
+    assert spin_until(lambda: len(clouds) >= count + 10)     # ticks and clouds go on
+    assert sim.bag is None and full.closed

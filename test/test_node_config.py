@@ -10,8 +10,9 @@ from diagnostic_msgs.msg import DiagnosticStatus
 from hcloth_ros import params
 from hcloth_ros.diagnostics import node_status
 from hcloth_ros.lifetime import rcl_reason, unreadable_params_files
-from hcloth_ros.node_params import (as_declared_type, check_change, params_files,
-                                    sections_for, SPEC_BY_NAME, startup_problems)
+from hcloth_ros.node_params import (as_declared_type, check_change, mixed_lists,
+                                    overrides_in, params_files, sections_for, SPEC_BY_NAME,
+                                    startup_problems)
 from hcloth_ros.ros_msgs import sim_stamp
 from hcloth_ros.tick_stats import TickStats
 import pytest
@@ -153,3 +154,22 @@ def test_diagnostics_carry_the_recent_tick_statistics():
     values = {kv.key: kv.value for kv in _status(recent=recent).values}
     assert values['tick_p50_ms'] == '9.550' and values['step_p99_ms'] == '9.991'
     assert values['governor_cap'] == '3' and values['real_time_factor_target'] == '1'
+
+
+def test_lists_mixing_integers_and_decimals_are_named():
+    doc = {'/**': {'ros__parameters': {'scene': {'boxes': [0, 0, 0.5, 0.1, 0.1, 0.1],
+                                                 'spheres': [0.0, 0.0, 0.5, 0.1]},
+                                       'pinned_points': [0, 8]}}}
+    lines = mixed_lists(doc)
+    assert len(lines) == 1 and lines[0].startswith('scene.boxes = [0, 0, 0.5')
+    assert lines[0].endswith('[0.0, 0.0, 0.5, 0.1, 0.1, 0.1]')
+    argv = ['sim_node', '--ros-args', '-p', 'scene.spheres:=[0,0,1.5,0.2]', '-p',
+            'cloth.width:=2']
+    assert overrides_in(argv) == {'scene.spheres': [0, 0, 1.5, 0.2], 'cloth.width': 2}
+    assert len(mixed_lists(overrides_in(argv))) == 1
+
+
+def test_no_factor_in_a_window_a_reset_sent_back():
+    status = _status(real_time_factor=None)
+    values = {kv.key: kv.value for kv in status.values}
+    assert status.level == DiagnosticStatus.OK and values['real_time_factor'] == 'n/a'
