@@ -17,6 +17,7 @@ import sys
 import threading
 
 import rclpy
+from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.impl.implementation_singleton import rclpy_implementation
 from rclpy.signals import SignalHandlerOptions
@@ -112,6 +113,10 @@ def run(make_node, args=None, poll=0.1):
             executor.spin_once(timeout_sec=poll)
     except StartupError as e:
         _report(e.lines)
+        code = BAD_CONFIGURATION
+    except (InvalidParameterTypeException, InvalidParameterValueException) as e:
+        # rclpy's own parameters (use_sim_time:=1) are declared before the node's checks
+        _report([f'cannot start: {" ".join(str(e).split())}'])
         code = BAD_CONFIGURATION
     except (KeyboardInterrupt, ExternalShutdownException):
         pass

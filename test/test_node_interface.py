@@ -195,6 +195,7 @@ def test_shutdown_deletes_the_markers(sim):
     (['-p', 'scene.boxes:=[0,0,0.5,0.1,0.1,0.1]'], ['scene.boxes', 'as decimals']),
     (['-p', 'rerun_path:=/nonexistent/run.rrd'], ['rerun_path', '/nonexistent/run.rrd']),
     (['-p', 'scene.moving_obstacles:=["finger cube 0.1"]'], ['scene.moving_obstacles']),
+    (['-p', 'use_sim_time:=1'], ['use_sim_time', 'BOOL']),    # rclpy's own parameter
 ])
 def test_a_bad_start_up_value_is_one_line_and_exit_code_2(args, names):
     env = dict(os.environ, ROS_DOMAIN_ID=str(random.randint(100, 200)))
