@@ -32,7 +32,7 @@ setup(
     },
     entry_points={
         'console_scripts': [
-            'sim_node = hcloth_ros.node:main',
+            'sim_node = hcloth_ros.start:main',
             'hcloth_demo = hcloth_ros.demo.headless:main',
             'hcloth_demo_run = hcloth_ros.demo.run:main',
             'hcloth_fold_client = hcloth_ros.demo.fold_client:main',

@@ -11,6 +11,7 @@ recording) go out through a live node; rclpy's own handlers shut the context dow
 """
 
 import faulthandler
+import os
 import re
 import signal
 import sys
@@ -47,7 +48,16 @@ def rcl_reason(error):
 
 
 def request_stop(signum=None, frame=None):
-    """Ask the spin loop to stop (the signal handler)."""
+    """
+    Ask the spin loop to stop (the signal handler); a second signal ends the process.
+
+    The first stop finishes the recording and the bag, which can wait on a disk; whoever
+    presses Ctrl-C again wants out now (exit code 128 + the signal, as the shell's).
+    """
+    if STOP.is_set() and signum is not None:
+        os.write(2, b'[WARN] [hcloth_sim]: second stop signal: exiting without finishing '
+                    b'the recording\n')
+        os._exit(128 + signum)
     STOP.set()
 
 

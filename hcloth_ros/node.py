@@ -745,8 +745,8 @@ def main(args=None):
     # lifetime, 0 crashes in about 220 interrupted starts (tools/interrupt_stress.py),
     # while the workqueue layer costs 2-4x the step at one thread (16k-point node
     # benchmark: tick p99 16.0 ms against 7.7 ms). NUMBA_THREADING_LAYER chooses another.
-    sys.exit(lifetime.run(ClothSimNode, args))
+    return lifetime.run(ClothSimNode, args)
 
 
 if __name__ == '__main__':
-    main()
+    sys.exit(main())
