@@ -63,7 +63,7 @@ import time
 
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseStamped
-from hcloth_ros import lifetime, params
+from hcloth_ros import lifetime, memory, params
 from hcloth_ros.core import kernels_cached, warm_up
 from hcloth_ros.core.control import PINNED
 from hcloth_ros.core.recovery import step_with_retries
@@ -118,6 +118,9 @@ class ClothSimNode(Node):
         self._warn_unknown_overrides()
         values = params.resolve({spec.name: self.get_parameter(spec.name).value
                                  for spec in params.PARAMS})
+        too_big = memory.refusal(values, self.get_parameter('memory_budget_mb').value)
+        if too_big:
+            raise StartupError([too_big])
         try:
             self.model, self.solver, self.state, self.control = params.build_all(values)
         except ValueError as e:     # combinations the table cannot state (parallel axes)

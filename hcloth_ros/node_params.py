@@ -41,6 +41,9 @@ NODE_PARAMS = [
           'of their own while the timer thread steps on (false: send within the tick)'),
     Param('bag_path', '', "record the node's own topics (cloud, LOD marker, scene, /clock) to "
           'this MCAP file (ros2 bag, Foxglove); empty: no bag'),
+    Param('memory_budget_mb', 8000.0, 'refuse to start a scene whose estimated memory '
+          '(README, "Memory") exceeds this many MB; 8000: a third of a 24 GB machine',
+          100.0, 1e7),
     Param('governor', True, 'shed refinement levels while ticks overrun the period '
           '(false: simulate every consumed level, however long a tick takes)',
           read_only=False),

@@ -196,6 +196,9 @@ def test_shutdown_deletes_the_markers(sim):
     (['-p', 'rerun_path:=/nonexistent/run.rrd'], ['rerun_path', '/nonexistent/run.rrd']),
     (['-p', 'scene.moving_obstacles:=["finger cube 0.1"]'], ['scene.moving_obstacles']),
     (['-p', 'use_sim_time:=1'], ['use_sim_time', 'BOOL']),    # rclpy's own parameter
+    # inside every range, but 3.7e11 points: refused before anything is allocated
+    (['-p', 'cloth.resolution:=[1025,1025]', '-p', 'cloth.levels:=10'],
+     ['366,505,621,514 points', 'memory_budget_mb 8000']),
 ])
 def test_a_bad_start_up_value_is_one_line_and_exit_code_2(args, names):
     env = dict(os.environ, ROS_DOMAIN_ID=str(random.randint(100, 200)))
