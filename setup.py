@@ -40,6 +40,7 @@ setup(
             'hcloth_engine_bench = hcloth_ros.bench.engine:main',
             'hcloth_bench = hcloth_ros.bench.__main__:main',
             'hcloth_contact_bench = hcloth_ros.bench.self_contact:main',
+            'hcloth_stress = hcloth_ros.bench.stress:main',
         ],
     },
 )

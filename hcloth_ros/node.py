@@ -430,6 +430,8 @@ class ClothSimNode(Node):
         if not hasattr(self, 'model'):
             return SetParametersResult(successful=True)     # initial declaration
         for p in changes:
+            if not p.name:     # rclpy lets an empty name through as if it were declared
+                return SetParametersResult(successful=False, reason='empty parameter name')
             reason = check_change(p.name, p.value, self.model)
             if reason:
                 return SetParametersResult(successful=False, reason=reason)
@@ -546,12 +548,16 @@ class ClothSimNode(Node):
         batch run depend on the machine, so it is off.
         """
         rtf = self.get_parameter('real_time_factor').value
-        self.period = self.dt * self.substeps / rtf if rtf > 0 else 0.0
+        period = self.dt * self.substeps / rtf if rtf > 0 else 0.0
+        wanted = self.get_parameter('governor').value and period > 0
+        if self.timer is not None and period == self.period \
+                and wanted == self.governor.enabled:
+            return      # a value set again (a slider, a reconfigure tool): no tick lost
+        self.period = period
         if self.timer is not None:
             self.destroy_timer(self.timer)
         self.timer = self.create_timer(self.period, self._on_timer, clock=self._steady)
         self.governor.period = self.period
-        wanted = self.get_parameter('governor').value and self.period > 0
         if wanted != self.governor.enabled:
             self.governor.set_enabled(wanted)
 
@@ -705,11 +711,18 @@ class ClothSimNode(Node):
                                    f'{self.governor.cap}')
 
     def _log(self, severity, text):
-        """Log a unit's message: warnings and errors throttled (they can come every tick)."""
+        """
+        Log a unit's message: warnings and errors throttled (they can come every tick).
+
+        One call site per severity: rclpy keys a throttled log by its call site and raises
+        when one site logs at two severities (a wrong frame then a NaN pose killed the node).
+        """
         if severity == 'info':
             self.get_logger().info(text)
+        elif severity == 'warning':
+            self.get_logger().warning(text, throttle_duration_sec=1.0)
         else:
-            getattr(self.get_logger(), severity)(text, throttle_duration_sec=1.0)
+            self.get_logger().error(text, throttle_duration_sec=1.0)
 
     def _held_points(self, k):
         kind = self.control.holds(k).kind.ravel()

@@ -7,6 +7,7 @@ change must pass before anything is applied: ranges are rclpy's (from the descri
 what depends on the model (level and point counts) is checked here.
 """
 
+import array
 import re
 
 from hcloth_ros import params
@@ -93,9 +94,11 @@ def as_declared_type(spec, value):
     default = spec.default
     if isinstance(default, float) and type(value) is int:
         return float(value)
-    if (isinstance(default, list) and isinstance(default[0], float)
-            and isinstance(value, (list, tuple)) and value
-            and all(type(v) is int for v in value)):
+    if not (isinstance(default, list) and isinstance(default[0], float)) or not value:
+        return value
+    if isinstance(value, array.array):      # from the parameter service
+        return array.array('d', value) if value.typecode == 'q' else value
+    if isinstance(value, (list, tuple)) and all(type(v) is int for v in value):
         return [float(v) for v in value]
     return value
 

@@ -8,6 +8,7 @@ A parameter file has the ROS 2 layout (``<node name or /**>: ros__parameters: ..
 nested keys become dotted names (``cloth: {width: 1.0}`` is ``cloth.width``).
 """
 
+import array
 from dataclasses import dataclass
 import os
 
@@ -169,12 +170,27 @@ def _kind(value):
 
 def _kind_fits(want, value):
     """Whether ``value`` has the kind ``want`` (integers are numbers too)."""
+    if want.endswith(' list') and isinstance(value, array.array):
+        # what rclpy hands over from the parameter service: its type code says it all
+        codes = {'float list': 'dq', 'int list': 'q'}.get(want, '')
+        return len(value) > 0 and value.typecode in codes
     if want.endswith(' list'):
         return (isinstance(value, (list, tuple)) and len(value) > 0
                 and all(_kind_fits(want[:-5], v) for v in value))
     if want == 'float':
         return isinstance(value, (int, float)) and not isinstance(value, bool)
     return _kind(value) == want if isinstance(value, (bool, int, float, str)) else False
+
+
+SEQUENCES = (list, tuple, array.array)
+
+
+def _short(value, shown=8):
+    """Return ``repr(value)``, a long list cut to its first items and its length."""
+    if isinstance(value, SEQUENCES) and len(value) > shown:
+        return f'[{", ".join(repr(v) for v in value[:shown])}, ... ({len(value)} values)]'
+    text = repr(list(value) if isinstance(value, array.array) else value)
+    return text if len(text) <= 200 else text[:200] + '...'
 
 
 def check_value(spec, value):
@@ -195,15 +211,15 @@ def check_value(spec, value):
         arr = np.atleast_1d(np.asarray(value, dtype=float))
         if not np.all(np.isfinite(arr)) or arr.min() < spec.low or arr.max() > spec.high:
             problem = 'out of range'
-    if problem is None and isinstance(value, (list, tuple)):
-        unset = list(value) in ([0.0], [-1])
+    if problem is None and isinstance(value, SEQUENCES):
+        unset = len(value) == 1 and value[0] in (0.0, -1)
         if spec.length and len(value) != spec.length:
             problem = f'{len(value)} values'
         elif spec.multiple and not unset and len(value) % spec.multiple:
             problem = f'{len(value)} values'
     if problem is None:
         return None
-    return f'{spec.name} = {value!r}: {problem}; allowed: {allowed(spec)}'
+    return f'{spec.name} = {_short(value)}: {problem}; allowed: {allowed(spec)}'
 
 
 def resolve(overrides=None):

@@ -448,3 +448,41 @@ def test_a_failed_bag_write_closes_the_bag_and_the_simulation_goes_on(graph):
     count = len(clouds)
     assert spin_until(lambda: len(clouds) >= count + 10)     # ticks and clouds go on
     assert sim.bag is None and full.closed
+
+
+def test_bad_poses_of_every_kind_one_after_another_are_each_logged_and_dropped(graph):
+    # rclpy raises when one call site logs throttled at two severities: a wrong frame (a
+    # warning) after a NaN pose (an error) ended the node (found by the stress suite)
+    sim, probe, clouds, _, spin_until, _ = graph
+    pose_pub, _ = _gripper_publishers(probe, 'left')
+    assert spin_until(lambda: len(clouds) >= 2)
+    now = probe.get_clock().now().to_msg()
+    for pose in (_pose(now, (np.nan, 0.0, 1.0)), _pose(now, (0.0, 0.0, 1.0), frame='map'),
+                 _pose(now, (0.0, 0.0, 1.0), (0.0, 0.0, 0.0, 0.0)),
+                 _pose(now, (np.inf, 0.0, 1.0)), _pose(now, (0.0, 0.0, 1.0), frame='odom')):
+        pose_pub.publish(pose)
+        count = len(clouds)
+        assert spin_until(lambda: len(clouds) >= count + 3)    # each one handled alone
+    assert sim.grippers['left'].translation is None     # every one of them was dropped
+
+
+def test_array_parameters_change_through_the_parameter_service(graph):
+    # the service hands arrays over as array.array, not lists: they were refused as the
+    # wrong type, so `ros2 param set` could never change pins or obstacles
+    import array
+    from rcl_interfaces.srv import SetParameters
+    sim, probe, _, _, spin_until, _ = graph
+    client = probe.create_client(SetParameters, '/hcloth_sim/set_parameters')
+    assert client.wait_for_service(timeout_sec=5.0)
+    request = SetParameters.Request(parameters=[
+        Parameter('pinned_points', value=[0, 8, 80]).to_parameter_msg(),
+        Parameter('scene.spheres', value=[0, 0, 0, 1]).to_parameter_msg(),     # integers
+        Parameter('', value=1.0).to_parameter_msg()])
+    future = client.call_async(request)
+    assert spin_until(future.done)
+    ok = [r.successful for r in future.result().results]
+    assert ok == [True, True, False], future.result().results
+    assert list(sim.get_parameter('pinned_points').value) == [0, 8, 80]
+    assert isinstance(sim.get_parameter('scene.spheres').value, array.array)
+    assert list(sim.get_parameter('scene.spheres').value) == [0.0, 0.0, 0.0, 1.0]
+    assert sim.model.scene.spheres.shape == (1, 4)
