@@ -41,6 +41,7 @@ setup(
             'hcloth_bench = hcloth_ros.bench.__main__:main',
             'hcloth_contact_bench = hcloth_ros.bench.self_contact:main',
             'hcloth_stress = hcloth_ros.bench.stress:main',
+            'hcloth_soak = hcloth_ros.bench.soak:main',
         ],
     },
 )

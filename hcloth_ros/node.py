@@ -683,7 +683,7 @@ class ClothSimNode(Node):
                                     'last tick are still being sent after 1 s; this tick '
                                     'publishes nothing', throttle_duration_sec=1.0)
         done = self._sender.sent
-        seconds = self._sender.seconds[-1] if done > self._sends_seen else 0.0
+        seconds = self._sender.last_seconds if done > self._sends_seen else 0.0
         self._sends_seen = done
         return free, seconds
 

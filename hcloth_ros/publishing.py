@@ -7,7 +7,6 @@ Needs message types but no ROS graph: the publishers are passed in (anything wit
 thread goes back to stepping while the middleware copies and sends them.
 """
 
-from collections import deque
 import threading
 import time
 
@@ -73,7 +72,7 @@ class PublishThread:
     than the timer slows the tick (where it shows) instead of dropping messages.
     """
 
-    def __init__(self, send, on_error=None, window=36000):
+    def __init__(self, send, on_error=None):
         self._send = send
         self._on_error = on_error
         self._ready = threading.Condition()
@@ -81,7 +80,7 @@ class PublishThread:
         self._busy = False          # the thread is sending
         self._closed = False
         self.sent = 0               # sends finished (whether or not the middleware failed)
-        self.seconds = deque(maxlen=window)     # how long each send took (s)
+        self.last_seconds = 0.0     # how long the last send took (s)
         self._thread = threading.Thread(target=self._run, name='hcloth_publish', daemon=True)
         self._thread.start()
 
@@ -125,7 +124,7 @@ class PublishThread:
             except BaseException as e:     # the thread must outlive any failure
                 self._report(e)
             finally:
-                self.seconds.append(time.perf_counter() - start)
+                self.last_seconds = time.perf_counter() - start
                 with self._ready:
                     self.sent += 1
                     self._busy = False

@@ -1,8 +1,6 @@
 """Per-tick phase times of the node, summarised when it stops."""
 
-from collections import deque
 from dataclasses import dataclass, field
-from itertools import islice
 import time
 
 import numpy as np
@@ -17,8 +15,10 @@ class TickStats:
     """
     Phase times (s) of every tick.
 
-    Percentiles over the last ``window`` ticks (10 minutes at 60 Hz: bounded memory on
-    long runs), the real-time factor over the whole run.
+    Percentiles over the last ``window`` ticks (10 minutes at 60 Hz), the real-time
+    factor over the whole run. Each series is a float64 ring allocated at its first tick:
+    deques of Python floats grew the node by about 2 MB a minute until they were full
+    (the soak benchmark), a ring takes its memory once.
     """
 
     window: int = 36000
@@ -30,9 +30,22 @@ class TickStats:
         """Record one tick: the phase times, ``levels`` simulated and ``sim_time``."""
         if self.wall_start is None:
             self.wall_start = time.monotonic() - values['tick']
+        slot = self.count % self.window
         for name, value in values.items():
-            self.samples.setdefault(name, deque(maxlen=self.window)).append(value)
+            if name not in self.samples:
+                self.samples[name] = np.zeros(self.window)
+            self.samples[name][slot] = value
         self.count += 1
+
+    def series(self, name, ticks=None):
+        """Return the last ``ticks`` values of one series, oldest first (all: its window)."""
+        held = min(self.count, self.window)
+        ticks = held if ticks is None else min(ticks, held)
+        end = self.count % self.window
+        ring = self.samples[name]
+        if ticks <= end:
+            return ring[end - ticks:end]
+        return np.concatenate([ring[self.window - (ticks - end):], ring[:end]])
 
     def summary(self):
         """
@@ -44,15 +57,15 @@ class TickStats:
         after the governor shed levels.
         """
         out = {'ticks': self.count}
-        levels = np.asarray(self.samples['levels'])
+        levels = self.series('levels')
         top = levels == levels.max()
         out['top_levels'] = {'ticks': int(top.sum())}
         for name in PHASES:
-            ms = np.asarray(self.samples[name]) * 1e3
+            ms = self.series(name) * 1e3
             out[name] = _percentiles(ms)
             out['top_levels'][name] = _percentiles(ms[top])
         wall = time.monotonic() - self.wall_start
-        out['real_time_factor'] = self.samples['sim_time'][-1] / wall if wall > 0 else 0.0
+        out['real_time_factor'] = self.series('sim_time', 1)[0] / wall if wall > 0 else 0.0
         out['levels_min'] = int(levels.min())
         out['levels_max'] = int(levels.max())
         return out
@@ -61,10 +74,7 @@ class TickStats:
         """Return p50/p99 in ms of each phase over the last ``ticks`` ticks ({} if none)."""
         if ticks <= 0 or not self.count:
             return {}
-        # the last ticks only: copying whole 10-minute windows cost ms a call
-        return {name: _percentiles(np.fromiter(islice(reversed(self.samples[name]), ticks),
-                                               float) * 1e3)
-                for name in PHASES}
+        return {name: _percentiles(self.series(name, ticks) * 1e3) for name in PHASES}
 
 
 def _percentiles(ms):
