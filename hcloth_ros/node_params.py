@@ -144,33 +144,34 @@ def startup_problems(overrides):
             for reason in [params.check_value(SPEC_BY_NAME[name], value)] if reason]
 
 
-def params_files(argv):
-    """Return the ``--params-file`` paths of the ROS arguments in ``argv``."""
-    files, ros = [], False
+def _ros_options(argv, flags):
+    """Yield the value after each of ``flags`` inside the ``--ros-args`` sections of argv."""
+    ros = False
     for i, arg in enumerate(argv):
         if arg == '--ros-args':
             ros = True
         elif arg == '--':
             ros = False
-        elif ros and arg == '--params-file' and i + 1 < len(argv):
-            files.append(argv[i + 1])
-    return files
+        elif ros and arg in flags and i + 1 < len(argv):
+            yield argv[i + 1]
+
+
+def params_files(argv):
+    """Return the ``--params-file`` paths of the ROS arguments in ``argv``."""
+    return list(_ros_options(argv, ('--params-file',)))
 
 
 def overrides_in(argv):
     """Return the ``-p name:=value`` overrides of the ROS arguments in ``argv`` (YAML values)."""
-    out, ros = {}, False
-    for i, arg in enumerate(argv):
-        if arg == '--ros-args':
-            ros = True
-        elif arg == '--':
-            ros = False
-        elif ros and arg in ('-p', '--param') and i + 1 < len(argv) and ':=' in argv[i + 1]:
-            name, _, text = argv[i + 1].partition(':=')
-            try:
-                out[name] = yaml.safe_load(text)
-            except yaml.YAMLError:
-                out[name] = text    # rcl reads it as a string
+    out = {}
+    for rule in _ros_options(argv, ('-p', '--param')):
+        name, sep, text = rule.partition(':=')
+        if not sep:
+            continue
+        try:
+            out[name] = yaml.safe_load(text)
+        except yaml.YAMLError:
+            out[name] = text    # rcl reads it as a string
     return out
 
 

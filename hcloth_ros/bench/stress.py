@@ -215,11 +215,6 @@ def recording(path):
     return True, steps, None if last is None else last * 1e-9, finished
 
 
-def percentile(values, q):
-    return statistics.quantiles(values, n=100, method='inclusive')[q - 1] \
-        if len(values) > 1 else (values[0] if values else float('nan'))
-
-
 # --- phases 1-4 ------------------------------------------------------------------------------
 PHASES = {1: ('flood', 'flood'), 2: ('params', 'params'), 3: ('services', 'services'),
           4: ('churn', 'churn'), 5: ('signals', None), 6: ('sigkill', None)}
@@ -370,7 +365,8 @@ def run_signals(opts, work, domain, rng):
     if unfinished:
         reasons.append(f'{unfinished} of {recorded} recordings not finished')
     return {'phase': '5 signals', 'sent': opts.starts, 'unit': 'starts', 'outcomes': outcomes,
-            'exit_p50': percentile(exits, 50), 'exit_max': slowest, 'recorded': recorded,
+            'exit_p50': statistics.median(exits) if exits else float('nan'),
+            'exit_max': slowest, 'recorded': recorded,
             'unfinished': unfinished, 'reasons': reasons, 'problems': problems}
 
 
