@@ -39,9 +39,9 @@ def test_fold_demo_folds_the_cloth_and_leaves_a_recording(tmp_path, monkeypatch)
     # (y > 0.3) on the ground, so the cloth is doubled over: its y extent has halved.
     # The fold measures (demo/fold_metrics.py) against issue 10's targets: none of the
     # top layer below the bottom one, the far edge moved at most 2 cm, the crease within
-    # 2 cm of the middle, where the client folds (0.0-0.2 cm and 1.5-1.6 cm in eight runs
-    # of the demo; in the engine alone 0.3 cm and 1.7 cm on 65 x 65 throughout, which a
-    # machine fast enough to keep the 65 x 65 level would see).
+    # 2 cm of the middle, where the client folds (six runs of the demo: 0, 0.0-0.2 cm and
+    # 1.6 cm; tools/fold_jitter.py, the engine with the node's command timing at random:
+    # 0, 0.0-0.1 cm, 1.6 cm in eight runs).
     import random
     import sys
 

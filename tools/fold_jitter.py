@@ -1,0 +1,89 @@
+"""
+The fold demo in the engine alone, with the node's command timing drawn at random.
+
+    .venv/bin/python tools/fold_jitter.py --runs 8 [--seed 0]
+
+The demo's client samples its path at 30 Hz on the simulation's clock and its messages
+reach the node one or two ticks later, so which tick a command lands on varies from run
+to run. This script drives the fold scene (``config/fold.yaml``) through the node's own
+gripper logic (:class:`~hcloth_ros.grippers.GripperBank`) with the client's path
+(:func:`~hcloth_ros.demo.fold_client.fold_pose`): the client's first tick, its phase
+against the node's ticks and each message's delay (1 tick, 2 in a quarter) drawn from the
+seed. It prints the fold measures of each run, as the demo does; a failure seen in some
+runs of the demo shows here with the seed that reproduces it.
+"""
+
+import argparse
+
+from hcloth_ros import params
+from hcloth_ros.core.recovery import step_with_retries
+from hcloth_ros.demo import fold_client
+from hcloth_ros.demo.fold_metrics import describe, fold_metrics
+from hcloth_ros.grippers import GripperBank, points_within
+import numpy as np
+
+RADIUS = 0.03       # m: the fold scene's grasp_radius
+NAMES = ('left', 'right')
+
+
+def client_messages(t, starts, far_y):
+    """Return the messages the client sends at t s into its path."""
+    out = []
+    if 0.3 <= t < 0.4:
+        out += [('close', n, True) for n in NAMES]
+    end = fold_client.DURATION + 2.0
+    if t <= end:
+        for n in NAMES:
+            offset, quaternion = fold_client.fold_pose(starts[n], far_y, t - 0.5)
+            out.append(('pose', n, (starts[n] + offset, quaternion)))
+    if fold_client.DURATION + 0.7 < t <= end:
+        out += [('close', n, False) for n in NAMES]
+    return out
+
+
+def run(seed):
+    """Fold once with the timing drawn from ``seed``; return the grids before and after."""
+    rng = np.random.default_rng(seed)
+    values = params.resolve(params.load_file(params.config_path('fold.yaml')))
+    model, solver, state, control = params.build_all(values)
+    dt = float(values['solver.dt'])
+    k = solver.levels()[-1]
+    before = state.points(k).copy()
+    pts = state.points_by_id(model, k)
+    starts = {'left': pts[np.argmin(pts[:, 0] + pts[:, 1])],
+              'right': pts[np.argmax(pts[:, 0] - pts[:, 1])]}
+    far_y = pts[:, 1].max()
+    bank = GripperBank(NAMES)
+    first, phase = int(rng.integers(3, 20)), int(rng.integers(0, 2))
+    inbox = [(first + 1, 'pose', n, (starts[n], (0, 0, 0, 1))) for n in NAMES]
+    for j in range(int((fold_client.DURATION + 4.0) / dt)):
+        if j > first and (j - first - phase) % 2 == 0:
+            lag = 2 if rng.random() < 0.25 else 1
+            sent = client_messages((j - first) * dt, starts, far_y)
+            inbox += [(j + lag,) + m for m in sent]
+        for item in [m for m in inbox if m[0] <= j]:
+            inbox.remove(item)
+            if item[1] == 'pose':
+                bank.set_pose(item[2], 'f', 'f', *item[3])
+            else:
+                bank.request_close(item[2], item[3])
+        bank.apply(control, state, lambda p: points_within(
+            state.points_by_id(model, solver.levels()[-1]), p, RADIUS))
+        step_with_retries(solver, state, control, dt)
+    return before, state.points(solver.levels()[-1]).copy()
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
+    parser.add_argument('--runs', type=int, default=8)
+    parser.add_argument('--seed', type=int, default=0, help="the first run's seed")
+    args = parser.parse_args(argv)
+    for seed in range(args.seed, args.seed + args.runs):
+        before, after = run(seed)
+        side = int(round(np.sqrt(before.size / 3)))
+        grids = (g.reshape(side, side, 3) for g in (before, after))
+        print(f'seed {seed}: {describe(fold_metrics(*grids))}', flush=True)
+
+
+if __name__ == '__main__':
+    main()
