@@ -42,6 +42,7 @@ setup(
             'hcloth_contact_bench = hcloth_ros.bench.self_contact:main',
             'hcloth_stress = hcloth_ros.bench.stress:main',
             'hcloth_soak = hcloth_ros.bench.soak:main',
+            'hcloth_replay = hcloth_ros.replay:main',
         ],
     },
 )

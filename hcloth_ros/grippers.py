@@ -7,7 +7,7 @@ commands keeps only the newest of each gripper; nothing is queued.
 
 from dataclasses import dataclass
 
-from hcloth_ros.core.poses import quaternion_to_matrix
+from hcloth_ros.core.poses import pose_fields, quaternion_to_matrix
 import numpy as np
 
 
@@ -96,10 +96,11 @@ class GripperBank:
         """Ask for a grasp (``closed`` true) or a release at the next tick."""
         self.grippers[name].close_request = bool(closed)
 
-    def apply(self, control, state, points_near):
+    def apply(self, apply, points_near):
         """
-        Apply the newest commands to ``control`` before a step.
+        Turn the newest requests into simulation commands before a step.
 
+        ``apply``: takes the commands (a :class:`~hcloth_ros.simulation.Simulation`'s);
         ``points_near(position)``: the point ids a gripper closing there takes. Returns
         ``(severity, message)`` lines to log.
         """
@@ -110,14 +111,15 @@ class GripperBank:
                 log.append(('warning', f'gripper {g.name}: close before any pose: ignored'))
             elif request and not g.grasping:
                 ids = points_near(g.translation)
-                control.grasp(g.name, ids, state, g.rotation, g.translation)
+                apply(['grasp', g.name, np.asarray(ids).tolist(),
+                       *pose_fields(g.rotation, g.translation)])
                 g.grasping, g.pose_pending = True, False
                 log.append(('info', f'gripper {g.name}: grasped {len(ids)} points'))
             elif request is False and g.grasping:
-                control.release(g.name)
+                apply(['release', g.name])
                 g.grasping = False
             if g.grasping and g.pose_pending:
-                control.move_grasp(g.name, g.rotation, g.translation)
+                apply(['move', g.name, *pose_fields(g.rotation, g.translation)])
                 g.pose_pending = False
         return log
 

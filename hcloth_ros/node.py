@@ -66,7 +66,6 @@ from geometry_msgs.msg import PoseStamped
 from hcloth_ros import lifetime, memory, params
 from hcloth_ros.core import kernels_cached, warm_up
 from hcloth_ros.core.control import PINNED
-from hcloth_ros.core.recovery import step_with_retries
 from hcloth_ros.core.solvers import HierarchicalSolver
 from hcloth_ros.diagnostics import node_status
 from hcloth_ros.governor import finest_to_simulate, Governor
@@ -75,10 +74,10 @@ from hcloth_ros.lifetime import StartupError
 from hcloth_ros.node_params import (ALL_PARAMS, as_declared_type, check_change, descriptor,
                                     NODE_PARAMS, params_files, scene_after, sections_for,
                                     SPEC_BY_NAME, startup_problems, unknown_overrides)
-from hcloth_ros.obstacles import ObstacleBank
 from hcloth_ros.publishing import ClothPublisher, PublishThread
 from hcloth_ros.ros_msgs import sim_stamp
 from hcloth_ros.scene_markers import scene_markers
+from hcloth_ros.simulation import plain, SETTINGS, Simulation
 from hcloth_ros.tick_stats import TickStats
 import numba
 from rcl_interfaces.msg import SetParametersResult
@@ -122,20 +121,20 @@ class ClothSimNode(Node):
         if too_big:
             raise StartupError([too_big])
         try:
-            self.model, self.solver, self.state, self.control = params.build_all(values)
+            # every change to it is a command, kept for the recording (exact replay)
+            self.sim = Simulation.build(values)
         except ValueError as e:     # combinations the table cannot state (parallel axes)
             raise StartupError([f'the scene cannot be built: {e}']) from None
-        self._next_scene = None     # checked, applied once the whole batch is accepted
         try:
-            self.obstacles = ObstacleBank(self.get_parameter('scene.moving_obstacles').value,
-                                          self.control.bodies, values['scene.friction'])
+            self.sim.add_moving_obstacles(self.get_parameter('scene.moving_obstacles').value)
         except ValueError as e:
             raise StartupError([f'parameter scene.moving_obstacles: {e}']) from None
+        # the same objects as the simulation's, for short: commands change them in place
+        self.model, self.solver, self.state, self.control = \
+            self.sim.model, self.sim.solver, self.sim.state, self.sim.control
+        self.obstacles = self.sim.obstacles
         # multi-level solvers simulate levels on demand and publish any level of detail
         self._levelled = isinstance(self.solver, HierarchicalSolver)
-        self.initial = self.state.copy()
-        self.dt = float(values['solver.dt'])
-        self.substeps = int(values['solver.substeps'])
         self.frame_id = self.get_parameter('frame_id').value
         self.top_level = self.model.level_count - 1
         self.lod_level = self.get_parameter('lod_level').value
@@ -168,6 +167,7 @@ class ClothSimNode(Node):
         self._make_obstacles()
         self.recorder = self._make_recorder()
         if self.recorder is not None:
+            self.recorder.log_start(self.sim.start_record(), numba.get_num_threads())
             self.recorder.log_obstacles(self.model.scene, self.state.time)
             self.recorder.log_bodies(self.control.bodies, self.state.time)
         self.bag = self._make_bag()
@@ -186,7 +186,8 @@ class ClothSimNode(Node):
         lv = self.model.level(self.top_level)
         self.get_logger().info(
             f'{self.solver.name} cloth, {self.model.level_count} levels, finest '
-            f'{lv.rows}x{lv.cols}, dt {self.dt * 1e3:.2f} ms x {self.substeps} per tick, '
+            f'{lv.rows}x{lv.cols}, dt {self.sim.dt * 1e3:.2f} ms x {self.sim.substeps} per '
+            f'tick, '
             f'{self._pace()}')
 
     # --- start-up ----------------------------------------------------------------------
@@ -436,8 +437,7 @@ class ClothSimNode(Node):
             if reason:
                 return SetParametersResult(successful=False, reason=reason)
         if any(p.name in params.PARAM_BY_NAME and p.name.startswith('scene.') for p in changes):
-            self._next_scene, reason = scene_after({p.name: p.value for p in changes},
-                                                   self._scene_values())
+            _, reason = scene_after({p.name: p.value for p in changes}, self._scene_values())
             if reason:
                 return SetParametersResult(successful=False, reason=reason)
         return SetParametersResult(successful=True)
@@ -450,22 +450,16 @@ class ClothSimNode(Node):
         """Apply an accepted batch of runtime changes."""
         for p in changes:
             if p.name == 'pinned_points':
-                self.control.set_pins(params.pin_ids(p.value))
+                self.sim.apply(['pins', params.pin_ids(p.value)])
             elif p.name == 'lod_level':
                 self.lod_level = self.governor.floor = p.value
-            elif p.name == 'solver.dt':
-                self.dt = float(p.value)
-            elif p.name == 'solver.substeps':
-                self.substeps = int(p.value)
-            elif p.name == 'solver.contact_rounds':
-                self.solver.contact_rounds = int(p.value)
-            elif p.name == 'solver.strain_limit':
-                self.solver.strain_limit = float(p.value) if p.value > 0 else None
-            elif p.name.startswith('scene.') and self._next_scene is not None:
-                self.model.scene, self._next_scene = self._next_scene, None
-                self.get_logger().info('static obstacles changed; a cloth inside them is '
-                                       'pushed out over the next steps')
-                self._show_scene('obstacles')
+            elif p.name in SETTINGS:
+                self.sim.apply(['set', p.name, plain(p.value)])
+        if any(p.name in params.PARAM_BY_NAME and p.name.startswith('scene.') for p in changes):
+            self.sim.apply(['scene', self._scene_values()])
+            self.get_logger().info('static obstacles changed; a cloth inside them is pushed '
+                                   'out over the next steps')
+            self._show_scene('obstacles')
         if {p.name for p in changes} & PACE:
             self._start_timer()
 
@@ -495,10 +489,8 @@ class ClothSimNode(Node):
         return sorted(self._reported_unknown)
 
     def _on_reset(self, request, response):
-        self._bag_offset += round((self.state.time - self.initial.time) * 1e9)
-        self.state.assign(self.initial)
-        self.control.release_all()
-        self.control.bodies.commit()    # obstacles stay where they are, at rest
+        self._bag_offset += round((self.state.time - self.sim.initial.time) * 1e9)
+        self.sim.apply(['reset'])
         self.grippers.forget_grasps()
         self._publish_clock()           # time goes back now, paused or not
         response.success = True
@@ -548,7 +540,7 @@ class ClothSimNode(Node):
         batch run depend on the machine, so it is off.
         """
         rtf = self.get_parameter('real_time_factor').value
-        period = self.dt * self.substeps / rtf if rtf > 0 else 0.0
+        period = self.sim.dt * self.sim.substeps / rtf if rtf > 0 else 0.0
         wanted = self.get_parameter('governor').value and period > 0
         if self.timer is not None and period == self.period \
                 and wanted == self.governor.enabled:
@@ -604,7 +596,7 @@ class ClothSimNode(Node):
         finest = finest_to_simulate(consumed_all, self.lod_level, self.governor.cap,
                                     self.top_level)
         if finest != self.solver.finest_level:
-            self.solver.set_finest_level(finest, self.state, self.control)
+            self.sim.apply(['levels', finest])
             self.get_logger().info(f'simulating levels 0..{finest}')
             self.governor.restart_grace()
 
@@ -616,16 +608,11 @@ class ClothSimNode(Node):
     def _tick(self):
         t0 = time.perf_counter()
         self._set_levels()
-        for severity, text in self.grippers.apply(self.control, self.state, self._points_near):
+        for severity, text in self.grippers.apply(self.sim.apply, self._points_near):
             self._log(severity, text)
-        moved = self.obstacles.apply()
-        for _ in range(self.substeps):
-            report, steps = step_with_retries(self.solver, self.state, self.control, self.dt)
-            if steps != 1:
-                self._report_retry(report, steps)
-            if not report.ok:
-                break
-        self.report = report
+        moved = self.obstacles.apply(self.sim.apply)
+        commands = self.sim.take_commands()
+        report = self.report = self.sim.advance(self._report_retry)
         stamp = self._publish_clock()
         bag_ns = self._bag_time()
         if moved:
@@ -643,7 +630,8 @@ class ClothSimNode(Node):
         t3 = time.perf_counter()
         if self.recorder is not None:
             self.recorder.log_step(self.state, finest, lod, report, t3 - t0,
-                                   self.dt * self.substeps, self._held_points(finest))
+                                   self.sim.dt * self.sim.substeps, self._held_points(finest),
+                                   commands)
         t4 = time.perf_counter()
         if self._sender is not None and free:
             # after the recorder: its Python would wait for the GIL the sending thread
@@ -693,9 +681,10 @@ class ClothSimNode(Node):
     def _report_retry(self, report, steps):
         """Say what recovery did: n smaller steps went through, or none did."""
         if steps:
+            ms = self.sim.dt * 1e3
             self.get_logger().warning(
-                f'step of {self.dt * 1e3:.2f} ms refused (blow-up); retried as {steps} steps '
-                f'of {self.dt * 1e3 / steps:.2f} ms: went through', throttle_duration_sec=1.0)
+                f'step of {ms:.2f} ms refused (blow-up); retried as {steps} steps of '
+                f'{ms / steps:.2f} ms: went through', throttle_duration_sec=1.0)
         else:
             self.get_logger().error(f'{report.reason}; retried in 2, 4 and 8 smaller steps, '
                                     'all refused', throttle_duration_sec=1.0)

@@ -11,6 +11,7 @@ A flood of poses keeps only the newest of each obstacle; nothing is queued.
 import re
 
 from hcloth_ros.core.bodies import MAX_BODIES, SHAPES
+from hcloth_ros.core.poses import pose_fields
 from hcloth_ros.grippers import checked_pose
 
 # a name must make a valid topic token: cloth/obstacles/<name>/pose
@@ -84,9 +85,13 @@ class ObstacleBank:
         self._pending[name] = pose
         return None
 
-    def apply(self):
-        """Place every obstacle with a new pose for the next step; returns whether any moved."""
+    def apply(self, apply):
+        """
+        Place every obstacle with a new pose for the next step; returns whether any moved.
+
+        ``apply``: takes the commands (a :class:`~hcloth_ros.simulation.Simulation`'s).
+        """
         pending, self._pending = self._pending, {}
         for name, (rotation, translation) in pending.items():
-            self.bodies.set_pose(name, rotation, translation)
+            apply(['body', name, *pose_fields(rotation, translation)])
         return bool(pending)

@@ -18,6 +18,11 @@ move) and ``metrics/*`` scalars (:data:`METRICS`), one per step unless said othe
   first call has no previous one and logs no value;
 * ``levels``, ``max_strain``, ``energy``.
 
+For exact replay (:mod:`hcloth_ros.replay`): ``replay/start`` (static, a JSON text: what
+builds the simulation again, :meth:`~hcloth_ros.simulation.Simulation.start_record`) and
+``replay/commands`` (a JSON text log: the commands applied before a step, on that step's
+``step``). The ``step`` timeline counts the logged steps from 0, across resets.
+
 The file is flushed every ``flush_period`` seconds so a crash loses at most that much, and
 :meth:`close` flushes and finishes it (footer included).
 
@@ -34,6 +39,7 @@ compress them about threefold; positions are float32 as simulated. A file's rows
 batched ``flush_period`` at a time, one chunk (with its schema) per entity.
 """
 
+import json
 import time
 
 from hcloth_ros.core.metrics import energy
@@ -104,6 +110,11 @@ def rounded_normals(normals):
 def _quaternion_from_z(normal):
     """Quaternion (xyzw) turning +z onto ``normal``."""
     return matrix_to_quaternion(rotation_between([0.0, 0.0, 1.0], normal))
+
+
+def _plain(value):
+    """Return as a list what JSON cannot write: arrays (numpy, rclpy's array.array)."""
+    return value.tolist()
 
 
 class Recorder:
@@ -232,17 +243,25 @@ class Recorder:
             labels=[p[0] for p in placed['capsule']], colors=MOVING_COLOUR,
             fill_mode='solid'))
 
+    def log_start(self, record, numba_threads):
+        """Log what builds the simulation again (``record``) and the kernels' thread count."""
+        text = json.dumps({**record, 'numba_threads': int(numba_threads)}, default=_plain)
+        self.rec.log('replay/start', rr.TextDocument(text), static=True)
+
     def log_step(self, state, finest, lod, report, wall_seconds, simulated_seconds,
-                 held=None):
+                 held=None, commands=()):
         """
         Log the state after a tick: meshes, held points and per-step metrics.
 
         ``wall_seconds``: the tick's compute time; ``simulated_seconds``: the time the tick
-        advanced the simulation; ``held``: name -> held points of level ``finest``.
+        advanced the simulation; ``held``: name -> held points of level ``finest``;
+        ``commands``: those applied before the tick's step, in order.
         """
         now = time.monotonic()
         self.rec.set_time('sim_time', duration=state.time)
         self.rec.set_time('step', sequence=self._steps)
+        if commands:
+            self.rec.log('replay/commands', rr.TextLog(json.dumps(commands, default=_plain)))
         if self._steps % self.finest_every == 0:
             self._mesh('cloth/finest', state, finest, 0xFFFFFFFF, shaded=True)
         self._mesh('cloth/lod', state, lod, 0x3C8CDC80)

@@ -115,7 +115,7 @@ def test_bad_pins_refused_and_reset_restores(graph):
                                            Parameter('lod_level', value=99)])
     assert not batch.successful and list(sim.control.pins) == [0, 8]
     assert spin_until(lambda: len(clouds) >= 10)
-    assert not np.array_equal(sim.state.q[3], sim.initial.q[3])
+    assert not np.array_equal(sim.state.q[3], sim.sim.initial.q[3])
     # no tick between the reset and the check (spinning for the response ran ticks after
     # it: the check failed under load)
     sim.timer.cancel()
@@ -124,7 +124,7 @@ def test_bad_pins_refused_and_reset_restores(graph):
     future = client.call_async(Trigger.Request())
     assert spin_until(future.done)
     assert future.result().success
-    assert np.array_equal(sim.state.q[3], sim.initial.q[3]) and sim.state.time == 0.0
+    assert np.array_equal(sim.state.q[3], sim.sim.initial.q[3]) and sim.state.time == 0.0
 
 
 def _gripper_publishers(probe, name):
@@ -240,7 +240,7 @@ def test_runtime_solver_parameters_take_effect(graph):
     assert sim.state.time - t0 == pytest.approx(0.01 * ticks, abs=0.02)
     assert sim.solver.strain_limit is None
     refused = sim.set_parameters([Parameter('solver.dt', value=5.0)])
-    assert not refused[0].successful and sim.dt == 0.005
+    assert not refused[0].successful and sim.sim.dt == 0.005
     read_only = sim.set_parameters([Parameter('cloth.levels', value=2)])
     assert not read_only[0].successful and sim.model.level_count == 4
 

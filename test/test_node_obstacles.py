@@ -76,7 +76,7 @@ def test_a_ball_on_its_pose_topic_lifts_the_cloth_and_bad_poses_are_dropped(star
         if pose is not None:
             points = sim.state.points(sim.solver.levels()[-1])
             closest.append(np.linalg.norm(points - pose[1], axis=1).min())
-        poses.publish(_pose((0.0, 0.0, sim.state.time + sim.dt)))
+        poses.publish(_pose((0.0, 0.0, sim.state.time + sim.sim.dt)))
     assert spin_until(lambda: sim.state.time >= 1.0, each=rise)
     # checked between ticks too: the ball a pose ahead can be nearer than the margin to the
     # cloth the last tick left, never inside its radius

@@ -14,6 +14,7 @@ from hcloth_ros.grippers import GripperBank, points_within
 from hcloth_ros.node_params import check_change, descriptor, NODE_PARAMS, unknown_overrides
 from hcloth_ros.publishing import ClothPublisher, PublishThread
 from hcloth_ros.ros_msgs import points_from_pointcloud2
+from hcloth_ros.simulation import Simulation
 from hcloth_ros.tick_stats import TickStats
 import numpy as np
 import pytest
@@ -115,7 +116,7 @@ def test_close_before_any_pose_is_ignored(cloth):
     model, state, control = cloth
     bank = GripperBank(['left'])
     bank.request_close('left', True)
-    log = bank.apply(control, state, near(model, state))
+    log = bank.apply(Simulation(model, None, state, control, 0.01, 1).apply, near(model, state))
     assert log == [('warning', 'gripper left: close before any pose: ignored')]
     assert control.grasp_names == [] and bank['left'].close_request is None
 
@@ -126,16 +127,17 @@ def test_grasp_follows_the_newest_pose_and_releases(cloth):
     corner = state.points_by_id(model, 2)[0]
     assert bank.set_pose('left', 'world', 'world', corner, (0, 0, 0, 1)) is None
     bank.request_close('left', True)
-    log = bank.apply(control, state, near(model, state))
+    log = bank.apply(Simulation(model, None, state, control, 0.01, 1).apply, near(model, state))
     assert log == [('info', 'gripper left: grasped 1 points')]
     assert bank['left'].grasping and control.grasp_names == ['left']
     # a flood: only the newest pose counts at the next tick
     for z in np.linspace(0.0, 0.3, 50):
         bank.set_pose('left', 'world', 'world', corner + [0.0, 0.0, z], (0, 0, 0, 1))
-    assert bank.apply(control, state, near(model, state)) == []
+    apply = Simulation(model, None, state, control, 0.01, 1).apply
+    assert bank.apply(apply, near(model, state)) == []
     assert np.allclose(control._grasps['left'].translation, corner + [0.0, 0.0, 0.3])
     bank.request_close('left', False)
-    bank.apply(control, state, near(model, state))
+    bank.apply(Simulation(model, None, state, control, 0.01, 1).apply, near(model, state))
     assert not bank['left'].grasping and control.grasp_names == []
 
 

@@ -99,9 +99,9 @@ def test_node_records_meshes_and_metrics(tmp_path):
         executor = SingleThreadedExecutor(context=context)
         executor.add_node(sim)
         end = time.monotonic() + 10
-        while sim.state.time < 30 * sim.dt - 1e-9 and time.monotonic() < end:
+        while sim.state.time < 30 * sim.sim.dt - 1e-9 and time.monotonic() < end:
             executor.spin_once(timeout_sec=0.05)
-        ticks = int(round(sim.state.time / sim.dt))
+        ticks = int(round(sim.state.time / sim.sim.dt))
         executor.shutdown()
         sim.destroy_node()          # closes the recording: flush and footer
     finally:

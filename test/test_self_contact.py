@@ -185,7 +185,7 @@ def _run_kernel(lv, start, end, qd, friction):
     result = kernels.self_contact(end, qd, dv, start, lv.mass,
                                   np.zeros(lv.shape, dtype=np.int8),
                                   np.ones(lv.shape, dtype=np.bool_), _no_support(lv),
-                                  THICKNESS, friction, 4, H, *patch_cache(*lv.shape), False)
+                                  THICKNESS, friction, 4, H, 10.0, *patch_cache(*lv.shape), False)
     return dv, result
 
 
@@ -260,7 +260,7 @@ def test_kernel_leaves_a_sheet_with_nothing_near_bit_for_bit():
     pairs, _, _ = kernels.self_contact(end, qd, dv, start, lv.mass,
                                        np.zeros(lv.shape, dtype=np.int8),
                                        np.ones(lv.shape, dtype=np.bool_), _no_support(lv),
-                                       THICKNESS, 0.3, 4, H, *patch_cache(*lv.shape), False)
+                                       THICKNESS, 0.3, 4, H, 10.0, *patch_cache(*lv.shape), False)
     assert pairs == 0
     assert np.array_equal(end, before) and not qd.any()
 
@@ -404,3 +404,28 @@ def test_thickness_is_checked():
         for bad in (0, -2, 10 ** 6):
             with pytest.raises(ValueError, match=name):
                 make_solver('multigrid', model, thickness=0.004, **{name: bad})
+
+
+def test_a_gripper_sent_across_the_cloth_is_refused_before_detection():
+    """
+    A grasped corner sent 2.8 m in one step: every patch met every other (43 s a step).
+
+    The step is refused with self-contact's reason and the state kept; a move of 0.28 m
+    (less than the cloth's 1 m) goes through as before.
+    """
+    from hcloth_ros import params
+    from hcloth_ros.simulation import Simulation
+    sim = Simulation.build(params.resolve({'self_contact.thickness': 0.004}))
+    corner = sim.state.points_by_id(sim.model, 3)[80]
+    turn = [[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]]
+    frame = corner - [0.0, 2.0, 0.0]        # a quarter turn about it: 2.8 m away
+    sim.apply(['grasp', 'g', [80], np.eye(3).tolist(), frame.tolist()])
+    sim.apply(['move', 'g', turn, frame.tolist()])
+    before = sim.state.q[3].copy()
+    report = sim.solver.step(sim.state, sim.control, 1 / 60)
+    assert not report.ok and report.reason.startswith('self-contact: a point moved more')
+    assert np.array_equal(sim.state.q[3], before) and sim.state.time == 0.0
+    frame = corner - [0.0, 0.2, 0.0]        # 0.28 m
+    sim.apply(['grasp', 'g', [80], np.eye(3).tolist(), frame.tolist()])
+    sim.apply(['move', 'g', turn, frame.tolist()])
+    assert sim.solver.step(sim.state, sim.control, 1 / 60).ok

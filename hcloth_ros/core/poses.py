@@ -69,3 +69,9 @@ def rotation_between(a, b):
         return 2 * np.outer(axis, axis) - np.eye(3)
     k = np.array([[0, -v[2], v[1]], [v[2], 0, -v[0]], [-v[1], v[0], 0]])
     return np.eye(3) + k + k @ k / (1 + c)
+
+
+def pose_fields(rotation, translation):
+    """Return a pose as plain lists, exactly (float64 to Python floats): JSON keeps them."""
+    return (np.asarray(rotation, np.float64).tolist(),
+            np.asarray(translation, np.float64).tolist())

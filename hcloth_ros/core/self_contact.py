@@ -129,8 +129,12 @@ class SelfContact:
             supports(solver.model.scene, solver._q[k], support)
             found, _, lost = kit.self_contact(
                 solver._q[k], solver._qd[k], solver._dv[k], start, lv.mass, holds.kind, moved,
-                support, self.thickness, self.friction, self.iterations, span, boxes, ends,
-                cones, touched, attempt > 0)
+                support, self.thickness, self.friction, self.iterations, span,
+                max(solver.model.width, solver.model.height), boxes, ends, cones, touched,
+                attempt > 0)
+            if found < 0:
+                solver._extra['self_contact_refused'] = True
+                return None
             pairs = found if pairs is None else pairs
             dropped = max(dropped, lost)
             if not found or solver.strain_limit is None or attempt == ROUNDS - 1:

@@ -352,7 +352,13 @@ class Solver:
                     # the rounds moved points: self-contact has the last word again
                     self.self_contact.apply(self, levels, state, holds, h)
                     self._inject_down(levels)
-        report = self._check(levels)
+        if self._extra.get('self_contact_refused'):
+            report = StepReport(False, 'self-contact: a point moved more than the cloth is '
+                                'long against the rest of it in one step (a gripper sent '
+                                'far?): step refused, last good state kept',
+                                levels=tuple(levels))
+        else:
+            report = self._check(levels)
         if report.ok:
             # the new state goes in by swapping arrays (no copy): State.q[k] and
             # State.qd[k] are other array objects after every step (see State)

@@ -1,0 +1,151 @@
+"""
+A running simulation and the commands that change it, kept in the order applied.
+
+Everything that changes a running cloth between two ticks goes through
+:meth:`Simulation.apply` as a command: a short list of strings and plain numbers, which JSON
+keeps exactly (a float's repr reads back as the same float). The node turns its inputs
+into commands; its recorder writes each tick's commands with the tick
+(``replay/commands``), and :mod:`hcloth_ros.replay` builds the same simulation from the
+recording's start (:meth:`Simulation.start_record`) and applies them before the same
+ticks, which re-simulates the run bit for bit. ``R`` is a rotation matrix (three rows),
+``p`` a translation (m), ids are point ids of the finest simulated level:
+
+* ``['grasp', name, ids, R, p]``: hold ``ids`` rigidly in a frame at pose ``(R, p)``;
+* ``['move', name, R, p]``: move a held frame; ``['release', name]``: let go;
+* ``['pins', ids]``: the pinned points, all of them;
+* ``['levels', finest]``: simulate levels 0..finest;
+* ``['body', name, R, p]``: place a moving obstacle for the next step;
+* ``['scene', values]``: the static obstacles from the ``scene.*`` parameters' values;
+* ``['set', name, value]``: one of :data:`SETTINGS`;
+* ``['reset']``: the initial state and time 0, nothing held, obstacles at rest.
+"""
+
+from importlib import metadata
+
+from hcloth_ros import params
+from hcloth_ros.core.recovery import step_with_retries
+from hcloth_ros.obstacles import ObstacleBank
+import numpy as np
+
+FORMAT = 1      # of the start record and the commands; a change breaks old recordings
+KINDS = ('grasp', 'move', 'release', 'pins', 'levels', 'body', 'scene', 'set', 'reset')
+SETTINGS = ('solver.dt', 'solver.substeps', 'solver.contact_rounds', 'solver.strain_limit')
+
+
+def version():
+    """Return the installed version of hcloth_ros ('unknown' outside an install)."""
+    try:
+        return metadata.version('hcloth_ros')
+    except metadata.PackageNotFoundError:
+        return 'unknown'
+
+
+def plain(value):
+    """Return a parameter value JSON can write (arrays and numpy numbers as lists, floats)."""
+    return value.tolist() if hasattr(value, 'tolist') else value
+
+
+class Simulation:
+    """
+    The engine (model, solver, state, control) with the tick's settings and a journal.
+
+    Made by :meth:`build` from parameter values (what the node and a replay do), or from
+    parts (``values``: what :meth:`start_record` reports; the friction of moving
+    obstacles comes from it). No moving obstacles until :meth:`add_moving_obstacles`.
+    """
+
+    def __init__(self, model, solver, state, control, dt, substeps, values=None):
+        self.model, self.solver, self.state, self.control = model, solver, state, control
+        self.values = {name: plain(v) for name, v in (values or {}).items()}
+        self.moving_obstacles = []
+        self.obstacles = ObstacleBank([], control.bodies, 0.0)
+        self.initial = state.copy()
+        self.dt, self.substeps = float(dt), int(substeps)
+        self._journal = []
+
+    @classmethod
+    def build(cls, values):
+        """
+        Build the simulation of resolved parameter values (:func:`params.resolve`).
+
+        Raises ValueError for a scene that cannot be built.
+        """
+        return cls(*params.build_all(values), values['solver.dt'], values['solver.substeps'],
+                   values)
+
+    def add_moving_obstacles(self, specs):
+        """Add the moving obstacles of ``scene.moving_obstacles`` strings (ValueError if bad)."""
+        self.obstacles = ObstacleBank(specs, self.control.bodies, self.values['scene.friction'])
+        self.moving_obstacles = [str(s) for s in specs if str(s).strip()]
+
+    def start_record(self):
+        """Return what :mod:`hcloth_ros.replay` needs to build this simulation again."""
+        return {'format': FORMAT, 'version': version(), 'values': self.values,
+                'moving_obstacles': self.moving_obstacles}
+
+    def apply(self, command):
+        """Apply one command (module docstring) and keep it for :meth:`take_commands`."""
+        kind, args = command[0], command[1:]
+        if kind not in KINDS:
+            raise ValueError(f'unknown command {kind!r} (have {KINDS})')
+        getattr(self, '_' + kind)(*args)
+        self._journal.append(command)
+
+    def take_commands(self):
+        """Return the commands applied since the last call, in order, and forget them."""
+        taken, self._journal = self._journal, []
+        return taken
+
+    def advance(self, on_retry=None):
+        """
+        Run one tick: ``substeps`` steps of ``dt``, each retried in smaller steps if refused.
+
+        ``on_retry(report, steps)`` hears of a step that needed retries; the tick stops at
+        a step no retry got through. Returns the last step's report.
+        """
+        for _ in range(self.substeps):
+            report, steps = step_with_retries(self.solver, self.state, self.control, self.dt)
+            if steps != 1 and on_retry is not None:
+                on_retry(report, steps)
+            if not report.ok:
+                break
+        return report
+
+    # --- the commands -------------------------------------------------------------------
+    def _grasp(self, name, ids, rotation, translation):
+        self.control.grasp(name, ids, self.state, np.array(rotation), np.array(translation))
+
+    def _move(self, name, rotation, translation):
+        self.control.move_grasp(name, np.array(rotation), np.array(translation))
+
+    def _release(self, name):
+        self.control.release(name)
+
+    def _pins(self, ids):
+        self.control.set_pins(ids)
+
+    def _levels(self, finest):
+        self.solver.set_finest_level(finest, self.state, self.control)
+
+    def _body(self, name, rotation, translation):
+        self.control.bodies.set_pose(name, np.array(rotation), np.array(translation))
+
+    def _scene(self, values):
+        self.model.scene = params.build_scene(values)
+
+    def _set(self, name, value):
+        if name == 'solver.dt':
+            self.dt = float(value)
+        elif name == 'solver.substeps':
+            self.substeps = int(value)
+        elif name == 'solver.contact_rounds':
+            self.solver.contact_rounds = int(value)
+        elif name == 'solver.strain_limit':
+            self.solver.strain_limit = float(value) if value > 0 else None
+        else:
+            raise ValueError(f'no setting {name!r} (have {SETTINGS})')
+
+    def _reset(self):
+        self.state.assign(self.initial)
+        self.control.release_all()
+        self.control.bodies.commit()    # obstacles stay where they are, at rest
