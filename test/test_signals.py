@@ -51,3 +51,30 @@ def test_ctrl_c_during_the_imports_exits_quietly_with_130():
         outcomes.append(proc.returncode)
     # 130 while importing; 0 if the node's handlers were already in place
     assert set(outcomes) <= {130, 0} and 130 in outcomes
+
+
+@pytest.mark.parametrize('signum', [signal.SIGINT, signal.SIGTERM])
+def test_a_stop_signal_during_the_imports_is_not_lost_when_the_parent_ignored_it(signum):
+    """
+    A background job of a non-interactive shell starts with SIGINT ignored.
+
+    Python keeps it ignored until someone installs a handler: a Ctrl-C in the imports was
+    lost and the node ran on (every start signalled at 0.3 s). The entry point's handler
+    ends the process at once, with the shell's code.
+    """
+    exe = os.path.join(sys.prefix, 'bin', 'sim_node')
+
+    def ignore_stops():
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+        signal.signal(signal.SIGTERM, signal.SIG_IGN)
+    proc = subprocess.Popen([exe], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True, preexec_fn=ignore_stops)
+    time.sleep(0.2)
+    proc.send_signal(signum)
+    try:
+        proc.communicate(timeout=10)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        proc.communicate()
+        pytest.fail('the signal was lost: the node ran on')
+    assert proc.returncode == 128 + signum
