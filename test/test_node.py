@@ -356,8 +356,9 @@ def test_real_time_factor_zero_runs_as_fast_as_possible_without_governor(graph):
     assert sim.period == 0.0 and not sim.governor.enabled
     start, wall = sim.state.time, time.monotonic()
     spin_until(lambda: False, timeout=1.0)
-    # 65 x 65 steps take about 1-2 ms here: far more than 60 simulated steps a second
-    assert (sim.state.time - start) / (time.monotonic() - wall) > 3.0
+    # a paced node gives 1.0; unpaced, 65 x 65 ticks (about 4 ms with the subscriber's
+    # cloud) give about 4 here, 2.9 once on a busy CI machine: clearly above real time
+    assert (sim.state.time - start) / (time.monotonic() - wall) > 1.5
     sim.set_parameters([Parameter('real_time_factor', value=1.0)])
     assert sim.period == pytest.approx(1 / 60) and sim.governor.enabled
 
