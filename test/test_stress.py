@@ -1,7 +1,7 @@
 """
 The stress suite's short mode: every phase against fresh nodes, each must pass.
 
-    .venv/bin/python -m pytest -q test/test_stress.py     # about 60 s on 2 cores
+    .venv/bin/python -m pytest -q test/test_stress.py     # about 90 s on 2 cores
 
 The long mode (``hcloth_stress --seconds 60 --starts 100``) is run by hand for the README.
 """
