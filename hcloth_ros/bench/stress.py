@@ -102,6 +102,29 @@ def sim_node(rrd=None, exe=None):
     return args
 
 
+_STARTED = []      # every process the suite starts, stopped when it ends however it ends
+
+
+def spawn(args, **kwargs):
+    """Start a process (``subprocess.Popen``) that the suite stops if it is itself stopped."""
+    proc = subprocess.Popen(args, **kwargs)
+    _STARTED.append(proc)
+    return proc
+
+
+def _stop_started():
+    """
+    Kill what is still running of the processes the suite started.
+
+    A suite stopped by SIGTERM (only its own pid) left its node of the moment running,
+    which loaded the machine for an hour until found.
+    """
+    for proc in _STARTED:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+
+
 class Child:
     """
     A process of this module in one ``--role``, driven by lines on its stdin and stdout.
@@ -112,9 +135,9 @@ class Child:
 
     def __init__(self, role, env, log, *args):
         self.log = open(log, 'w')
-        self.proc = subprocess.Popen([sys.executable, '-m', MODULE, '--role', role,
-                                      *map(str, args)], env=env, stdin=subprocess.PIPE,
-                                     stdout=subprocess.PIPE, stderr=self.log, text=True)
+        self.proc = spawn([sys.executable, '-m', MODULE, '--role', role, *map(str, args)],
+                          env=env, stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                          stderr=self.log, text=True)
         self.lines = queue.Queue()
         threading.Thread(target=self._read, daemon=True).start()
 
@@ -239,8 +262,8 @@ def run_phase(number, opts, work, domain):
             row['reasons'].append('the watcher did not start')
             return row
         with open(log, 'w') as f:
-            proc = subprocess.Popen(sim_node(rrd, opts.node), env=env, stdout=f,
-                                    stderr=subprocess.STDOUT)
+            proc = spawn(sim_node(rrd, opts.node), env=env, stdout=f,
+                         stderr=subprocess.STDOUT)
         started = time.monotonic()
         if watcher.expect('first', FIRST_CLOUD) is None:
             row['reasons'].append(f'no first {"cloud" if number != 4 else "tick"} within '
@@ -328,9 +351,9 @@ def run_signals(opts, work, domain, rng):
         rrd = os.path.join(work, f'start{i}.rrd')
         err_path = os.path.join(work, 'start.err')
         with open(err_path, 'w') as err:
-            proc = subprocess.Popen(sim_node(rrd, opts.node), env=env,
-                                    stdout=subprocess.DEVNULL,
-                                    stderr=err)
+            proc = spawn(sim_node(rrd, opts.node), env=env,
+                         stdout=subprocess.DEVNULL,
+                         stderr=err)
         delay = rng.uniform(0.3, 3.0)
         time.sleep(delay)
         code, seconds = stop_node(proc, sig)
@@ -386,8 +409,8 @@ def run_kills(opts, work, domain, rng):
                 reasons.append(f'kill {i}: the watcher did not start')
                 continue
             with open(os.path.join(work, f'node_kill{i}.log'), 'w') as f:
-                proc = subprocess.Popen(sim_node(rrd, opts.node), env=env, stdout=f,
-                                        stderr=subprocess.STDOUT)
+                proc = spawn(sim_node(rrd, opts.node), env=env, stdout=f,
+                             stderr=subprocess.STDOUT)
             if watcher.expect('first', FIRST_CLOUD) is None:
                 reasons.append(f'kill {i}: no first cloud')
                 continue
@@ -527,6 +550,15 @@ def main(argv=None):
           f'{opts.rate:g}/s, {opts.starts} starts, {opts.kills} kills; ROS_DOMAIN_ID '
           f'{domain}, seed {opts.seed}; load average {os.getloadavg()[0]:.2f} on '
           f'{os.cpu_count()} CPUs', flush=True)
+    signal.signal(signal.SIGTERM, lambda signum, frame: sys.exit(128 + signum))
+    try:
+        return _run_phases(opts, phases, domain, rng)
+    finally:
+        _stop_started()
+
+
+def _run_phases(opts, phases, domain, rng):
+    """Run the phases in turn, print their details and the table; return the exit code."""
     rows = []
     with tempfile.TemporaryDirectory(prefix='hcloth_stress_') as work:
         for number in phases:
