@@ -188,8 +188,7 @@ class ClothSimNode(Node):
         self.get_logger().info(
             f'{self.solver.name} cloth, {self.model.level_count} levels, finest '
             f'{lv.rows}x{lv.cols}, dt {self.sim.dt * 1e3:.2f} ms x {self.sim.substeps} per '
-            f'tick, '
-            f'{self._pace()}')
+            f'tick, {self._pace()}')
 
     # --- start-up ----------------------------------------------------------------------
     def _check_overrides(self):
@@ -437,14 +436,15 @@ class ClothSimNode(Node):
             reason = check_change(p.name, p.value, self.model)
             if reason:
                 return SetParametersResult(successful=False, reason=reason)
-        if any(p.name in params.PARAM_BY_NAME and p.name.startswith('scene.') for p in changes):
+        if _changes_scene(changes):
             _, reason = scene_after({p.name: p.value for p in changes}, self._scene_values())
             if reason:
                 return SetParametersResult(successful=False, reason=reason)
         return SetParametersResult(successful=True)
 
     def _scene_values(self):
-        return {spec.name: self.get_parameter(spec.name).value for spec in params.PARAMS
+        """Return the ``scene.*`` parameters' values, plain (rclpy's arrays as lists)."""
+        return {spec.name: plain(self.get_parameter(spec.name).value) for spec in params.PARAMS
                 if spec.name.startswith('scene.')}
 
     def _apply_parameters(self, changes):
@@ -456,7 +456,9 @@ class ClothSimNode(Node):
                 self.lod_level = self.governor.floor = p.value
             elif p.name in SETTINGS:
                 self.sim.apply(['set', p.name, plain(p.value)])
-        if any(p.name in params.PARAM_BY_NAME and p.name.startswith('scene.') for p in changes):
+        if _changes_scene(changes):
+            # built a second time (the check built it too): rare, and the command then
+            # holds only values, as a replay needs
             self.sim.apply(['scene', self._scene_values()])
             self.get_logger().info('static obstacles changed; a cloth inside them is pushed '
                                    'out over the next steps')
@@ -766,6 +768,11 @@ class ClothSimNode(Node):
             self.recorder.close()
             self.recorder = None
         super().destroy_node()
+
+
+def _changes_scene(changes):
+    """Whether a batch of parameter changes touches the static obstacles."""
+    return any(p.name in params.PARAM_BY_NAME and p.name.startswith('scene.') for p in changes)
 
 
 def main(args=None):

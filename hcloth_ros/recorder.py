@@ -115,11 +115,6 @@ def _quaternion_from_z(normal):
     return matrix_to_quaternion(rotation_between([0.0, 0.0, 1.0], normal))
 
 
-def _plain(value):
-    """Return as a list what JSON cannot write: arrays (numpy, rclpy's array.array)."""
-    return value.tolist()
-
-
 class Recorder:
     """Records one run to ``path`` (an ``.rrd`` file) or streams it to ``url``."""
 
@@ -248,7 +243,7 @@ class Recorder:
 
     def log_start(self, record, numba_threads):
         """Log what builds the simulation again (``record``) and the kernels' thread count."""
-        text = json.dumps({**record, 'numba_threads': int(numba_threads)}, default=_plain)
+        text = json.dumps({**record, 'numba_threads': int(numba_threads)})
         self.rec.log('replay/start', rr.TextDocument(text), static=True)
 
     def log_step(self, state, finest, lod, report, wall_seconds, simulated_seconds,
@@ -264,7 +259,7 @@ class Recorder:
         self.rec.set_time('sim_time', duration=state.time)
         self.rec.set_time('step', sequence=self._steps)
         if commands:
-            self.rec.log('replay/commands', rr.TextLog(json.dumps(commands, default=_plain)))
+            self.rec.log('replay/commands', rr.TextLog(json.dumps(commands)))
         if self._steps % self.finest_every == 0:
             self._mesh('cloth/finest', state, finest, 0xFFFFFFFF, shaded=True)
         self._mesh('cloth/lod', state, lod, 0x3C8CDC80)

@@ -2,6 +2,8 @@
 The fold demo in the engine alone, with the node's command timing drawn at random.
 
     .venv/bin/python tools/fold_jitter.py --runs 8 [--seed 0]
+    .venv/bin/python tools/fold_jitter.py --runs 6 --lift 0.38
+    .venv/bin/python tools/fold_jitter.py --runs 8 --lift 0.25 --stop-short 0.01 --translate-only
 
 The demo's client samples its path at 30 Hz on the simulation's clock and its messages
 reach the node one or two ticks later, so which tick a command lands on varies from run
@@ -10,23 +12,25 @@ gripper logic (:class:`~hcloth_ros.grippers.GripperBank`) with the client's path
 (:func:`~hcloth_ros.demo.fold_client.fold_pose`): the client's first tick, its phase
 against the node's ticks and each message's delay (1 tick, 2 in a quarter) drawn from the
 seed. It prints the fold measures of each run, as the demo does; a failure seen in some
-runs of the demo shows here with the seed that reproduces it.
+runs of the demo shows here with the seed that reproduces it. ``--lift`` and
+``--stop-short`` change the client's path (its ``LIFT`` and ``SHORT``), ``--translate-only``
+keeps the grippers from turning (the client before it turned them).
 """
 
 import argparse
 
 from hcloth_ros import params
-from hcloth_ros.core.recovery import step_with_retries
 from hcloth_ros.demo import fold_client
 from hcloth_ros.demo.fold_metrics import describe, fold_metrics
 from hcloth_ros.grippers import GripperBank, points_within
+from hcloth_ros.simulation import Simulation
 import numpy as np
 
 RADIUS = 0.03       # m: the fold scene's grasp_radius
 NAMES = ('left', 'right')
 
 
-def client_messages(t, starts, far_y):
+def client_messages(t, starts, far_y, turn=True):
     """Return the messages the client sends at t s into its path."""
     out = []
     if 0.3 <= t < 0.4:
@@ -35,31 +39,30 @@ def client_messages(t, starts, far_y):
     if t <= end:
         for n in NAMES:
             offset, quaternion = fold_client.fold_pose(starts[n], far_y, t - 0.5)
-            out.append(('pose', n, (starts[n] + offset, quaternion)))
+            out.append(('pose', n, (starts[n] + offset, quaternion if turn else (0, 0, 0, 1))))
     if fold_client.DURATION + 0.7 < t <= end:
         out += [('close', n, False) for n in NAMES]
     return out
 
 
-def run(seed):
+def run(seed, turn=True):
     """Fold once with the timing drawn from ``seed``; return the grids before and after."""
     rng = np.random.default_rng(seed)
     values = params.resolve(params.load_file(params.config_path('fold.yaml')))
-    model, solver, state, control = params.build_all(values)
-    dt = float(values['solver.dt'])
-    k = solver.levels()[-1]
-    before = state.points(k).copy()
-    pts = state.points_by_id(model, k)
+    sim = Simulation.build(values)
+    k = sim.solver.levels()[-1]
+    before = sim.state.points(k).copy()
+    pts = sim.state.points_by_id(sim.model, k)
     starts = {'left': pts[np.argmin(pts[:, 0] + pts[:, 1])],
               'right': pts[np.argmax(pts[:, 0] - pts[:, 1])]}
     far_y = pts[:, 1].max()
     bank = GripperBank(NAMES)
     first, phase = int(rng.integers(3, 20)), int(rng.integers(0, 2))
     inbox = [(first + 1, 'pose', n, (starts[n], (0, 0, 0, 1))) for n in NAMES]
-    for j in range(int((fold_client.DURATION + 4.0) / dt)):
+    for j in range(int((fold_client.DURATION + 4.0) / sim.dt)):
         if j > first and (j - first - phase) % 2 == 0:
             lag = 2 if rng.random() < 0.25 else 1
-            sent = client_messages((j - first) * dt, starts, far_y)
+            sent = client_messages((j - first) * sim.dt, starts, far_y, turn)
             inbox += [(j + lag,) + m for m in sent]
         for item in [m for m in inbox if m[0] <= j]:
             inbox.remove(item)
@@ -67,19 +70,27 @@ def run(seed):
                 bank.set_pose(item[2], 'f', 'f', *item[3])
             else:
                 bank.request_close(item[2], item[3])
-        bank.apply(control, state, lambda p: points_within(
-            state.points_by_id(model, solver.levels()[-1]), p, RADIUS))
-        step_with_retries(solver, state, control, dt)
-    return before, state.points(solver.levels()[-1]).copy()
+        bank.apply(sim.apply, lambda p: points_within(
+            sim.state.points_by_id(sim.model, sim.solver.levels()[-1]), p, RADIUS))
+        sim.advance()
+    return before, sim.state.points(sim.solver.levels()[-1]).copy()
 
 
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
     parser.add_argument('--runs', type=int, default=8)
     parser.add_argument('--seed', type=int, default=0, help="the first run's seed")
+    parser.add_argument('--lift', type=float, default=fold_client.LIFT,
+                        help=f"the path's height, m (default {fold_client.LIFT})")
+    parser.add_argument('--stop-short', type=float, default=fold_client.SHORT,
+                        help=f'how far short of the far edge the corners stop, m (default '
+                             f'{fold_client.SHORT})')
+    parser.add_argument('--translate-only', action='store_true',
+                        help='the grippers do not turn with the corners')
     args = parser.parse_args(argv)
+    fold_client.LIFT, fold_client.SHORT = args.lift, args.stop_short
     for seed in range(args.seed, args.seed + args.runs):
-        before, after = run(seed)
+        before, after = run(seed, turn=not args.translate_only)
         side = int(round(np.sqrt(before.size / 3)))
         grids = (g.reshape(side, side, 3) for g in (before, after))
         print(f'seed {seed}: {describe(fold_metrics(*grids))}', flush=True)

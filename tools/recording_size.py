@@ -17,6 +17,12 @@ estimate of each part's share). The issue's figures, at the node's defaults:
     .venv/bin/python tools/recording_size.py --seconds 60
     .venv/bin/python tools/recording_size.py --seconds 60 -p cloth.levels=5
     .venv/bin/python tools/recording_size.py --seconds 60 -o finest_every=30
+
+``--file PATH`` reports a recording that exists instead (a node's, the demo's), over the
+simulated time of its steps (the ``step`` timeline's count times the step's length, from
+its ``replay/start``: resets do not shorten it):
+
+    .venv/bin/python tools/recording_size.py --file out/fold.rrd
 """
 
 import argparse
@@ -162,6 +168,20 @@ def _report(path, seconds, ticks, out=sys.stdout):
           f'{(size - total) / seconds / 1e6:.4f} MB/s', file=out)
 
 
+def simulated_seconds(path):
+    """Return a node's recording's simulated seconds: its steps times the tick's length."""
+    from hcloth_ros.replay import read_commands
+    from rerun.chunk import RrdReader
+    start, _ = read_commands(path)
+    steps = 0
+    for chunk in RrdReader(path).stream():
+        if chunk.entity_path == '/metrics/step_ms':
+            steps = max([steps] + [s + 1 for s in chunk.to_record_batch().column('step')
+                                   .to_pylist()])
+    values = start['values']
+    return steps * values['solver.dt'] * values['solver.substeps'], steps
+
+
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.split('\n')[1])
     parser.add_argument('--seconds', type=float, default=10.0, help='simulated seconds')
@@ -176,7 +196,12 @@ def main(argv=None):
                         help="step as fast as possible instead of at the node's pace")
     parser.add_argument('--threads', type=int, default=1, help='numba threads')
     parser.add_argument('--keep', default='', help='also copy the .rrd to this path')
+    parser.add_argument('--file', default='', help='report this recording instead')
     args = parser.parse_args(argv)
+    if args.file:
+        seconds, ticks = simulated_seconds(args.file)
+        _report(args.file, seconds, ticks)
+        return
     numba.set_num_threads(args.threads)
     options = {'finest_every': _node_default('rerun_finest_every'),
                **_assignments(args.option)}

@@ -26,10 +26,10 @@ from sensor_msgs.msg import PointCloud2
 from std_msgs.msg import Bool
 
 # m: the half ellipse's height. Lower, the near edge sagged more between the grippers and
-# landed short in the middle, pushing the crease off the middle (0.38: 2.8 cm; 0.42: 1.5-1.6
-# cm, 0.0-0.1 cm far edge in 8 of 8 runs of the engine with the node's tick jitter);
-# higher, the top layer landed stretched and sprang over the far edge on release, a corner
-# tucking under it (0.46: 2 of 6 runs)
+# landed short in the middle, pushing the crease off the middle (0.38: 2.9-3.0 cm; 0.42:
+# 1.5-1.8 cm, far edge 0.0-0.2 cm, 0 below in 24 of 24 runs of tools/fold_jitter.py, the
+# engine with the node's tick jitter); higher, the top layer landed stretched and sprang
+# over the far edge on release, a corner tucking under it (0.46: 1 of 6 runs)
 LIFT = 0.42
 DURATION = 4.0      # s: from the start corner to the far edge
 SHORT = 0.02        # m: the corners stop this short of the far edge
@@ -48,7 +48,7 @@ def fold_pose(start, far_y, t):
     the cloth it holds lies upside down on the far half at the end. Held without turning
     (translated only), the corner's patch ended pointing past the far edge: its points
     reached the ground beyond it and slid under the bottom layer's edge on release (1-2
-    points below in 2 of 12 runs).
+    points below in 2 of 12 demo runs, 1 in 24 runs of tools/fold_jitter.py).
     """
     half = 0.5 * (far_y - start[1])
     s = np.clip(t / DURATION, 0.0, 1.0)
