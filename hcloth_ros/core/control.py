@@ -22,6 +22,7 @@ Pins win over grasps for a point that is both.
 from dataclasses import dataclass
 
 # the hold kinds are the kernels' (re-exported here for the engine's users)
+from hcloth_ros.core import buffers
 from hcloth_ros.core.bodies import MovingBodies
 from hcloth_ros.core.kernels.layout import DRIVEN, FREE, PINNED  # noqa: F401
 from hcloth_ros.core.poses import check_rotation, check_vector
@@ -186,7 +187,7 @@ class Control:
         kinds, drive = [], []
         for k in range(model.level_count):
             lv = model.level(k)
-            kind = np.zeros(lv.rows * lv.cols, dtype=np.int8)
+            kind = buffers.zeros(lv.rows * lv.cols, dtype=np.int8)
             sources = []
             for name, g in self._grasps.items():
                 kind[g.grid_index[k]] = DRIVEN

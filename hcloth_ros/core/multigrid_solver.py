@@ -19,6 +19,7 @@ Material damping (air drag, spring damping) comes from the model; with none, how
 cloth settles is BDF2's own small numerical damping.
 """
 
+from hcloth_ros.core import buffers
 from hcloth_ros.core.kernels.layout import FREE
 from hcloth_ros.core.kernels.multigrid import DENSE_MAX_POINTS
 from hcloth_ros.core.model import ClothBuilder
@@ -73,21 +74,21 @@ class _Hierarchy:
         self.stiffness = np.array([lv.stiffness for lv in levels])
         self.contraction = np.array([lv.contraction for lv in levels])
         self.free = np.ones(total)
-        self.positions = np.zeros(3 * total)
-        self.mass = np.zeros(total)
-        self.coef_uu = np.zeros(6 * total)
-        self.coef_iso = np.zeros(6 * total)
-        self.directions = np.zeros(18 * total)
-        self.block_inverse = np.zeros(6 * total)
-        self.mg = [np.zeros(3 * total) for _ in range(3)]
+        self.positions = buffers.zeros(3 * total)
+        self.mass = buffers.zeros(total)
+        self.coef_uu = buffers.zeros(6 * total)
+        self.coef_iso = buffers.zeros(6 * total)
+        self.directions = buffers.zeros(18 * total)
+        self.block_inverse = buffers.zeros(6 * total)
+        self.mg = [buffers.zeros(3 * total) for _ in range(3)]
         rows, cols = self.shapes[-1]
         self.top_air_drag = self.air_drag[self.offsets[-2]:].reshape(rows, cols)
         coarsest = sizes[0] if sizes[0] <= DENSE_MAX_POINTS else 0
-        self.factor = np.zeros((3 * coarsest, 3 * coarsest))
+        self.factor = buffers.zeros((3 * coarsest, 3 * coarsest))
         shape = (3, levels[-1].rows, levels[-1].cols)
         # finest-level vectors: v+, held targets, -R, the correction, CG's r, z, p, Ap
         (self.v, self.target, self.rhs, self.correction, self.r, self.z, self.p,
-         self.ap) = (np.zeros(shape) for _ in range(8))
+         self.ap) = (buffers.zeros(shape) for _ in range(8))
 
     def set_holds(self, kind):
         """Mark the top level's free points (the coarser grids follow by injection)."""
@@ -165,10 +166,10 @@ class MultigridSolver(HierarchicalSolver):
         self._hierarchies = {}
         # per level: the anchor of the step, and BDF2's history (the state before the
         # last step and after it)
-        self._x_hat = [np.zeros_like(q) for q in self._q]
-        self._v_hat = [np.zeros_like(q) for q in self._q]
-        self._previous = [(np.zeros_like(q), np.zeros_like(q)) for q in self._q]
-        self._current = [(np.zeros_like(q), np.zeros_like(q)) for q in self._q]
+        self._x_hat = [buffers.zeros_like(q) for q in self._q]
+        self._v_hat = [buffers.zeros_like(q) for q in self._q]
+        self._previous = [(buffers.zeros_like(q), buffers.zeros_like(q)) for q in self._q]
+        self._current = [(buffers.zeros_like(q), buffers.zeros_like(q)) for q in self._q]
         self._history_key = None
         self._history = False
         self._beta = None

@@ -28,7 +28,7 @@ state keeps its last good value and the report says why.
 from dataclasses import dataclass, field
 import time
 
-from hcloth_ros.core import kernels
+from hcloth_ros.core import buffers, kernels
 from hcloth_ros.core.control import FREE
 from hcloth_ros.core.scene import MARGIN
 from hcloth_ros.core.self_contact import SelfContact
@@ -136,13 +136,13 @@ class Solver:
         self.contact_sweeps = int(contact_sweeps)
         self.blowup_strain = float(blowup_strain)
         shapes = [(3, lv.rows, lv.cols) for lv in model.levels]
-        self._q = [np.zeros(s) for s in shapes]
-        self._qd = [np.zeros(s) for s in shapes]
-        self._dv = [np.zeros(s) for s in shapes]
-        self._presc = [np.zeros(s) for s in shapes]
-        self._scratch = [np.zeros(s) for s in shapes]
-        self._a = [np.zeros(s) for s in shapes]
-        self._integrated = [np.zeros(s) for s in shapes]
+        self._q = [buffers.zeros(s) for s in shapes]
+        self._qd = [buffers.zeros(s) for s in shapes]
+        self._dv = [buffers.zeros(s) for s in shapes]
+        self._presc = [buffers.zeros(s) for s in shapes]
+        self._scratch = [buffers.zeros(s) for s in shapes]
+        self._a = [buffers.zeros(s) for s in shapes]
+        self._integrated = [buffers.zeros(s) for s in shapes]
         self._dinv = {}
         self._touched = False
         self._bodies, self._dt = np.zeros((0, 0)), 0.0     # set by each step
@@ -448,7 +448,7 @@ class HierarchicalSolver(Solver):
     def __init__(self, model, finest_level=None, **options):
         super().__init__(model, **options)
         self.finest_level = model.level_count - 1 if finest_level is None else finest_level
-        self._dv_app = [np.zeros_like(x) for x in self._q]
+        self._dv_app = [buffers.zeros_like(x) for x in self._q]
 
     @property
     def finest_level(self):
@@ -521,7 +521,7 @@ class ImplicitSolver(_SingleLevel):
         self.cg_rtol = float(cg_rtol)
         self.cg_max_iter = int(cg_max_iter)
         shape = self._q[self.level].shape
-        self._work = [np.zeros(shape) for _ in range(8)]
+        self._work = [buffers.zeros(shape) for _ in range(8)]
 
     def _integrate(self, k, state, holds, h):
         lv, kit = self.model.level(k), self.kernels(k)

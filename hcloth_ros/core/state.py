@@ -1,5 +1,6 @@
 """Time-varying cloth state: positions and velocities of every level."""
 
+from hcloth_ros.core import buffers
 from hcloth_ros.core.kernels import points_by_id_f32
 import numpy as np
 
@@ -32,7 +33,7 @@ class State:
     def at_rest(cls, model):
         """Return the model's rest rectangle with zero velocity at every level."""
         q = [model.rest_positions(k) for k in range(model.level_count)]
-        return cls(q, [np.zeros_like(a) for a in q])
+        return cls(q, [buffers.zeros_like(a) for a in q])
 
     def copy(self):
         return State([a.copy() for a in self.q], [a.copy() for a in self.qd], self.time)
