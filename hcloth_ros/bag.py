@@ -275,21 +275,23 @@ class BagWriter:
         """
         Write ``msg`` on the registered ``topic`` at ``stamp_ns``.
 
-        ``stamp_ns`` is the simulation time in nanoseconds (a non-negative int); it becomes
-        both the log time and the publish time of the message.
+        ``msg`` is a message of the topic's type, or its serialised bytes (as the node's
+        LOD marker comes, :class:`~hcloth_ros.ros_msgs.TriangleMarker`). ``stamp_ns`` is
+        the simulation time in nanoseconds (a non-negative int); it becomes both the log
+        time and the publish time of the message.
         """
         self._check_open()
         try:
             channel, msg_type = self._channels[topic]
         except KeyError:
             raise KeyError(f'topic {topic} is not registered (call add_topic first)') from None
-        if type(msg) is not msg_type:
+        if type(msg) is not msg_type and not isinstance(msg, bytes):
             raise TypeError(f'{topic} carries {msg_type.__name__}, got {type(msg).__name__}')
         stamp = int(stamp_ns)
         if stamp < 0:
             raise ValueError(f'stamp_ns must be non-negative, got {stamp_ns}')
-        self._writer.add_message(channel, log_time=stamp, data=serialize_message(msg),
-                                 publish_time=stamp)
+        data = msg if isinstance(msg, bytes) else serialize_message(msg)
+        self._writer.add_message(channel, log_time=stamp, data=data, publish_time=stamp)
 
     def _check_open(self):
         """Raise ValueError once the bag is closed."""

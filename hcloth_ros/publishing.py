@@ -19,8 +19,8 @@ class ClothPublisher:
     Packs and publishes ``cloth/points`` and ``cloth/lod_marker``.
 
     The cloud (the finest simulated level, point-id order) is built only while someone
-    subscribes; the marker of each level keeps its ``Point`` objects between ticks
-    (:class:`~hcloth_ros.ros_msgs.TriangleMarker`).
+    subscribes; the marker of each level is kept serialised between ticks and sent as
+    bytes (:class:`~hcloth_ros.ros_msgs.TriangleMarker`).
     """
 
     def __init__(self, model, frame_id, cloud_publisher, marker_publisher, ns='hcloth_lod'):
@@ -68,8 +68,8 @@ class PublishThread:
     cloud costs the middleware 1-4 ms to copy and send; off the timer's thread that time
     overlaps the next step's kernels (they release the GIL) instead of adding to the tick.
     The node waits (:meth:`wait`) for the last tick's messages to be sent before packing
-    the next ones: the marker's points are reused between ticks, and a publisher slower
-    than the timer slows the tick (where it shows) instead of dropping messages.
+    the next ones: a publisher slower than the timer slows the tick (where it shows)
+    instead of dropping messages.
     """
 
     def __init__(self, send, on_error=None):
