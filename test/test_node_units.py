@@ -7,6 +7,7 @@ publisher gets fake publishers that count what they are given.
 
 import threading
 
+from builtin_interfaces.msg import Time
 from hcloth_ros import params
 from hcloth_ros.core import ClothBuilder, Control, State
 from hcloth_ros.governor import finest_to_simulate, Governor
@@ -18,6 +19,8 @@ from hcloth_ros.simulation import Simulation
 from hcloth_ros.tick_stats import TickStats
 import numpy as np
 import pytest
+from rclpy.serialization import deserialize_message
+from visualization_msgs.msg import Marker
 
 
 PERIOD = 1.0 / 60.0
@@ -176,18 +179,23 @@ def test_publisher_packs_the_cloud_only_for_subscribers_and_reuses_markers(cloth
     model, state, _ = cloth
     clouds, markers = FakePublisher(), FakePublisher()
     out = ClothPublisher(model, 'world', clouds, markers)
-    cloud, marker = out.pack(state, 2, 1, None)
+    stamp = Time(sec=2, nanosec=7)
+    cloud, marker = out.pack(state, 2, 1, stamp)
     assert cloud is None
     out.publish(cloud, marker)
     assert clouds.published == [] and markers.published == [marker]
     clouds.subscribers = 1
-    cloud, again = out.pack(state, 2, 1, None)
-    assert again is marker                      # one marker per level, refilled in place
-    assert len(marker.points) == 3 * 2 * 4 * 4  # level 1: 5 x 5 points
+    cloud, again = out.pack(state, 2, 1, stamp)
+    assert again == marker                      # the same level's marker, the same bytes
+    msg = deserialize_message(again, Marker)
+    assert len(msg.points) == 3 * 2 * 4 * 4     # level 1: 5 x 5 points
     assert np.allclose(points_from_pointcloud2(cloud), state.points_by_id(model, 2),
                        atol=1e-6)
-    assert cloud.header.frame_id == marker.header.frame_id == 'world'
-    assert out.pack(state, 2, 0, None)[1] is not marker
+    assert cloud.header.frame_id == msg.header.frame_id == 'world'
+    assert cloud.header.stamp == msg.header.stamp == stamp
+    assert list(out._markers) == [1]            # one marker per level, built on first use
+    coarse = deserialize_message(out.pack(state, 2, 0, stamp)[1], Marker)
+    assert len(coarse.points) == 3 * 2 * 2 * 2 and list(out._markers) == [1, 0]
 
 
 def test_publish_thread_sends_every_tick_in_order_from_its_own_thread():
