@@ -78,9 +78,15 @@ PARAMS = [
           'multigrid-CG; finer levels follow eq. 7 (clipped to the finest level)', 0, 9),
     Param('solver.integrator', 'bdf2', 'multigrid: bdf2 or backward_euler',
           choices=('bdf2', 'backward_euler')),
-    Param('solver.newton_iterations', 3, 'multigrid: Newton iterations per step', 1, 100),
+    Param('solver.newton_iterations', 3, 'multigrid: Newton iterations every step takes',
+          1, 100),
     Param('solver.cg_iterations', 2, 'multigrid: preconditioned CG iterations per Newton '
           'iteration', 1, 1000),
+    Param('solver.max_newton_iterations', 12, 'multigrid: most Newton iterations a step '
+          'takes while its residual is above solver.newton_tolerance (at least '
+          'solver.newton_iterations)', 1, 100),
+    Param('solver.newton_tolerance', 0.3, 'multigrid: residual a step may leave, in units of '
+          'the momentum the weight gives the cloth over the step', 1e-6, 1e6),
     Param('solver.external', 'exact', 'gravity outside the filter (exact) or inside it '
           '(literal, the paper as written)', choices=('exact', 'literal')),
     Param('solver.strain_limit', 0.1, 'largest spring stretch kept by strain limiting '
@@ -287,7 +293,9 @@ def build_solver(model, values):
         options = {'accurate_level': int(values['solver.accurate_level']),
                    'integrator': values['solver.integrator'],
                    'newton_iterations': int(values['solver.newton_iterations']),
-                   'cg_iterations': int(values['solver.cg_iterations'])}
+                   'cg_iterations': int(values['solver.cg_iterations']),
+                   'max_newton_iterations': int(values['solver.max_newton_iterations']),
+                   'newton_tolerance': float(values['solver.newton_tolerance'])}
     thickness = float(values['self_contact.thickness'])
     if thickness > 0.0:
         options.update(thickness=thickness,

@@ -97,6 +97,30 @@ def test_the_fold_in_the_engine_with_the_node_timing_meets_the_fold_targets():
     with the corners (``--translate-only --lift 0.25 --stop-short 0.01``, the path before;
     the demo failed a CI run on it); the same targets as the demo's.
     """
+    metrics = _fold_in_the_engine(17)
+    assert metrics['top_below'] == 0
+    assert metrics['far_edge_moved'] <= 0.02 and metrics['fold_offset'] <= 0.02
+
+
+def test_the_multigrid_solver_folds_the_cloth_without_tearing_it():
+    """
+    The same fold under ``multigrid`` (BDF2 on the 33 x 33 level, eq. 7 on 65 x 65).
+
+    With three Newton iterations whatever the residual, the solves left springs at 30-50 %
+    once the layers met and the cloth tore: 1795 top-layer points below the bottom layer,
+    far edge 42.6 cm, largest strain 3.2 on 65 x 65 solved; with level 0 solved, far edge
+    15.3 cm and the cloth unfolded (issue 10's note). Iterating while the residual is above
+    tolerance, 8 seeds of tools/fold_jitter.py gave 0 below, far edge 0.2-0.3 cm and the
+    crease 1.5-5.3 cm from the middle: the demo's targets but the crease's, where the
+    bending springs, no longer damped away, hold a loop.
+    """
+    metrics = _fold_in_the_engine(17, {'solver.name': 'multigrid', 'solver.accurate_level': 0})
+    assert metrics['top_below'] == 0
+    assert metrics['far_edge_moved'] <= 0.02 and metrics['fold_offset'] <= 0.06
+
+
+def _fold_in_the_engine(seed, overrides=None):
+    """Fold measures of tools/fold_jitter.py's run of ``seed`` (parameter overrides)."""
     import importlib.util
     from hcloth_ros.demo.fold_metrics import fold_metrics
     path = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))),
@@ -104,8 +128,6 @@ def test_the_fold_in_the_engine_with_the_node_timing_meets_the_fold_targets():
     spec = importlib.util.spec_from_file_location('fold_jitter', path)
     jitter = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(jitter)
-    before, after = jitter.run(17)
+    before, after = jitter.run(seed, overrides=overrides)
     side = int(round(np.sqrt(len(before))))
-    metrics = fold_metrics(before.reshape(side, side, 3), after.reshape(side, side, 3))
-    assert metrics['top_below'] == 0
-    assert metrics['far_edge_moved'] <= 0.02 and metrics['fold_offset'] <= 0.02
+    return fold_metrics(before.reshape(side, side, 3), after.reshape(side, side, 3))

@@ -4,6 +4,8 @@ The fold demo in the engine alone, with the node's command timing drawn at rando
     .venv/bin/python tools/fold_jitter.py --runs 8 [--seed 0]
     .venv/bin/python tools/fold_jitter.py --runs 6 --lift 0.38
     .venv/bin/python tools/fold_jitter.py --runs 8 --lift 0.25 --stop-short 0.01 --translate-only
+    .venv/bin/python tools/fold_jitter.py --runs 8 -p solver.name=multigrid \
+        -p solver.accurate_level=0
 
 The demo's client samples its path at 30 Hz on the simulation's clock and its messages
 reach the node one or two ticks later, so which tick a command lands on varies from run
@@ -14,10 +16,12 @@ against the node's ticks and each message's delay (1 tick, 2 in a quarter) drawn
 seed. It prints the fold measures of each run, as the demo does; a failure seen in some
 runs of the demo shows here with the seed that reproduces it. ``--lift`` and
 ``--stop-short`` change the client's path (its ``LIFT`` and ``SHORT``), ``--translate-only``
-keeps the grippers from turning (the client before it turned them).
+keeps the grippers from turning (the client before it turned them), ``-p NAME=VALUE``
+overrides a parameter of the scene (a YAML value).
 """
 
 import argparse
+import time
 
 from hcloth_ros import params
 from hcloth_ros.demo import fold_client
@@ -25,6 +29,7 @@ from hcloth_ros.demo.fold_metrics import describe, fold_metrics
 from hcloth_ros.grippers import GripperBank, points_within
 from hcloth_ros.simulation import Simulation
 import numpy as np
+import yaml
 
 RADIUS = 0.03       # m: the fold scene's grasp_radius
 NAMES = ('left', 'right')
@@ -45,10 +50,16 @@ def client_messages(t, starts, far_y, turn=True):
     return out
 
 
-def run(seed, turn=True):
-    """Fold once with the timing drawn from ``seed``; return the grids before and after."""
+def run(seed, turn=True, overrides=None):
+    """
+    Fold once with the timing drawn from ``seed``; return the grids before and after.
+
+    ``overrides``: parameter values that replace the fold scene's.
+    """
     rng = np.random.default_rng(seed)
-    values = params.resolve(params.load_file(params.config_path('fold.yaml')))
+    values = params.load_file(params.config_path('fold.yaml'))
+    values.update(overrides or {})
+    values = params.resolve(values)
     sim = Simulation.build(values)
     k = sim.solver.levels()[-1]
     before = sim.state.points(k).copy()
@@ -87,13 +98,21 @@ def main(argv=None):
                              f'{fold_client.SHORT})')
     parser.add_argument('--translate-only', action='store_true',
                         help='the grippers do not turn with the corners')
+    parser.add_argument('-p', '--param', action='append', default=[], metavar='NAME=VALUE',
+                        help='a parameter override (YAML value), repeatable')
     args = parser.parse_args(argv)
     fold_client.LIFT, fold_client.SHORT = args.lift, args.stop_short
+    overrides = {}
+    for assignment in args.param:
+        name, value = assignment.split('=', 1)
+        overrides[name] = yaml.safe_load(value)
     for seed in range(args.seed, args.seed + args.runs):
-        before, after = run(seed, turn=not args.translate_only)
+        start = time.perf_counter()
+        before, after = run(seed, not args.translate_only, overrides)
         side = int(round(np.sqrt(before.size / 3)))
         grids = (g.reshape(side, side, 3) for g in (before, after))
-        print(f'seed {seed}: {describe(fold_metrics(*grids))}', flush=True)
+        print(f'seed {seed}: {describe(fold_metrics(*grids))} '
+              f'({time.perf_counter() - start:.1f} s)', flush=True)
 
 
 if __name__ == '__main__':
