@@ -3,9 +3,11 @@ What contact costs a step: self-contact, and a moving finger on a cloth on the g
 
     hcloth_contact_bench [--sizes 129,257] [--steps 60] [--thickness 0.004]
                          [--intervals 1,4] [--rounds 0,16] [--json FILE]
+                         [--option NAME=VALUE ...]
 
-For each finest size the ``multigrid`` solver (default options, level 0 9 x 9) runs two
-scenes, with self-contact off and on every n-th step for each ``--intervals`` n:
+For each finest size the ``multigrid`` solver (default options but those given with
+``--option``, level 0 9 x 9) runs two scenes, with self-contact off and on every n-th step
+for each ``--intervals`` n:
 
 * ``swing``: the benchmark's cloth pinned at two corners swings from horizontal: nothing
   of it comes near itself, the cost of checking;
@@ -25,6 +27,7 @@ the thread count and the load average. The kernel is serial: one thread whatever
 """
 
 import argparse
+import ast
 import json
 import os
 import time
@@ -109,14 +112,15 @@ def _move_finger(control, i):
     control.bodies.set_pose('finger', ALONG_Y, (0.2 * i / 60, 0.5, 1.5 + 0.011 - 0.003))
 
 
-def run(n, scene, steps, thickness, interval, rounds=16):
+def run(n, scene, steps, thickness, interval, rounds=16, extra=None):
     """
     Time ``steps`` steps of one scene.
 
-    ``interval`` None: self-contact off; ``rounds``: the solver's ``contact_rounds``.
+    ``interval`` None: self-contact off; ``rounds``: the solver's ``contact_rounds``;
+    ``extra``: more solver options.
     """
     model, state, control = scene_setup(n, scene)
-    options = {'contact_rounds': rounds}
+    options = dict(extra or {}, contact_rounds=rounds)
     if interval is not None:
         options.update(thickness=thickness, self_contact_interval=interval)
     solver = make_solver('multigrid', model, **options)
@@ -171,8 +175,16 @@ def main(argv=None):
     parser.add_argument('--rounds', default='0,16',
                         help='contact_rounds values for the finger scene, comma-separated')
     parser.add_argument('--json', help='also write the figures to this file')
+    parser.add_argument('--option', action='append', default=[], metavar='NAME=VALUE',
+                        help='a multigrid solver option (a Python literal), repeatable, '
+                             'e.g. max_newton_iterations=3')
     args = parser.parse_args(argv)
-    print(f'contact cost: self-contact thickness {args.thickness * 1e3:g} mm, multigrid, '
+    extra = {}
+    for assignment in args.option:
+        name, value = assignment.split('=', 1)
+        extra[name] = ast.literal_eval(value)
+    print(f'contact cost: self-contact thickness {args.thickness * 1e3:g} mm, multigrid '
+          f'{extra or ""}, '
           f'{numba.get_num_threads()} numba thread(s), load average '
           f'{os.getloadavg()[0]:.2f}', flush=True)
     settings = [None] + [int(s) for s in args.intervals.split(',')]
@@ -180,10 +192,12 @@ def main(argv=None):
     for n in (int(s) for s in args.sizes.split(',')):
         for scene in ('swing', 'folded'):
             for interval in settings:
-                results.append(run(n, scene, args.steps, args.thickness, interval))
+                results.append(run(n, scene, args.steps, args.thickness, interval,
+                                   extra=extra))
                 print(_line(results[-1]), flush=True)
         for rounds in (int(s) for s in args.rounds.split(',')):
-            results.append(run(n, 'finger', args.steps, args.thickness, None, rounds))
+            results.append(run(n, 'finger', args.steps, args.thickness, None, rounds,
+                               extra))
             print(_line(results[-1]), flush=True)
     print(f'load average after: {os.getloadavg()[0]:.2f}')
     if args.json:
