@@ -94,7 +94,7 @@ class SelfContact:
             self._start = state.q[k].copy() if self.interval > 1 else None
         return self._steps + 1 >= self.interval
 
-    def apply(self, solver, levels, state, holds, h):
+    def apply(self, solver, levels, state, holds, h, moved=None):
         """
         Run on the finest of ``levels`` (the solver's step buffers), then down the hierarchy.
 
@@ -104,6 +104,11 @@ class SelfContact:
         move single points: strain limiting (if the solver has it) spreads them to their
         neighbours, then contact runs again, as it may have pulled points back in, up to
         ``ROUNDS`` times. Returns the pairs found, or None when this step does not check.
+
+        ``moved`` (a mask of the level's points), for a second call in the same step: the
+        points moved since the last call, which left nothing near; the first detection
+        then tests round them only and keeps the other patches' boxes (None: every point,
+        every box).
 
         Obstacles do not run after it. A point above a plane or a box's top moves towards
         it by at most its distance to the obstacle's margin (:func:`supports`, taken at
@@ -121,17 +126,22 @@ class SelfContact:
         start = state.q[k] if self._start is None else self._start
         span = (self._steps + 1) * h    # the time the kernel's paths cover
         pairs, dropped = None, 0
-        moved, before, support = self._buffers(lv.shape)
+        mask, before, support = self._buffers(lv.shape)
         boxes, ends, cones, touched = self._patches
-        moved[:] = True
+        if moved is None:
+            mask[:] = True
+        else:
+            np.copyto(mask, moved)
+            if not mask.any():
+                return 0
         for attempt in range(ROUNDS):
             np.copyto(before, solver._q[k])
             supports(solver.model.scene, solver._q[k], support)
             found, _, lost = kit.self_contact(
-                solver._q[k], solver._qd[k], solver._dv[k], start, lv.mass, holds.kind, moved,
+                solver._q[k], solver._qd[k], solver._dv[k], start, lv.mass, holds.kind, mask,
                 support, self.thickness, self.friction, self.iterations, span,
                 max(solver.model.width, solver.model.height), boxes, ends, cones, touched,
-                attempt > 0)
+                attempt > 0 or moved is not None)
             if found < 0:
                 solver._extra['self_contact_refused'] = True
                 return None
@@ -146,8 +156,8 @@ class SelfContact:
             # (elsewhere nothing changed since this call's first detection) and
             # recomputes the patch boxes there and where this call moved points; none
             # moved: done
-            np.any(solver._q[k] != before, axis=0, out=moved)
-            if not moved.any():
+            np.any(solver._q[k] != before, axis=0, out=mask)
+            if not mask.any():
                 break
         if dropped:
             solver._extra['self_contact_dropped'] = dropped

@@ -143,6 +143,8 @@ class Solver:
         self._scratch = [buffers.zeros(s) for s in shapes]
         self._a = [buffers.zeros(s) for s in shapes]
         self._integrated = [buffers.zeros(s) for s in shapes]
+        # the finest level before the rounds that follow self-contact (see step)
+        self._before_rounds = [buffers.zeros(s) for s in shapes]
         self._dinv = {}
         self._touched = False
         self._bodies, self._dt = np.zeros((0, 0)), 0.0     # set by each step
@@ -348,9 +350,13 @@ class Solver:
             if self._deferred is not None:
                 k, holds, h_post, limit, scene, integrated = self._deferred
                 self._deferred = None
+                before = self._before_rounds[k]
+                np.copyto(before, self._q[k])
                 if self._wrap(k, state, holds, h_post, limit, scene, integrated):
-                    # the rounds moved points: self-contact has the last word again
-                    self.self_contact.apply(self, levels, state, holds, h)
+                    # the rounds moved points: self-contact has the last word again, round
+                    # the points they moved (elsewhere its last call left nothing near)
+                    self.self_contact.apply(self, levels, state, holds, h,
+                                            moved=np.any(self._q[k] != before, axis=0))
                     self._inject_down(levels)
         if self._extra.get('self_contact_refused'):
             report = StepReport(False, 'self-contact: a point moved more than the cloth is '

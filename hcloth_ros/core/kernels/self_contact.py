@@ -609,28 +609,61 @@ def _detect(x0, x1, rows, cols, thickness, substeps, dirty, pairs, sides, boxes,
 
 @numba.njit(**JIT)
 def _longest_move(x0, x1, ta, tb, shift):
-    """Return the longest path of a point between ``ta`` and ``tb`` in the shifted frame."""
+    """
+    Return the longest path of a point between ``ta`` and ``tb`` in the shifted frame.
+
+    Squared lengths compared, one square root at the end (a root a point cost 0.03 ms a
+    call on 129 x 129).
+    """
     longest = 0.0
     for i in range(x0.shape[1]):
-        ex = (tb - ta) * (x1[0, i] - x0[0, i] - shift[0])
-        ey = (tb - ta) * (x1[1, i] - x0[1, i] - shift[1])
-        ez = (tb - ta) * (x1[2, i] - x0[2, i] - shift[2])
-        longest = max(longest, math.sqrt(ex * ex + ey * ey + ez * ez))
-    return longest
+        ex = x1[0, i] - x0[0, i] - shift[0]
+        ey = x1[1, i] - x0[1, i] - shift[1]
+        ez = x1[2, i] - x0[2, i] - shift[2]
+        longest = max(longest, ex * ex + ey * ey + ez * ez)
+    return abs(tb - ta) * math.sqrt(longest)
+
+
+@numba.njit(**JIT)
+def _squared(x, i, j):
+    """Squared distance between points i and j of ``x`` (3, n)."""
+    ex, ey, ez = x[0, j] - x[0, i], x[1, j] - x[1, i], x[2, j] - x[2, i]
+    return ex * ex + ey * ey + ez * ez
+
+
+@numba.njit(**JIT)
+def _longest_edge_from(x, i0, j0, count, longest):
+    """
+    Return the larger of ``longest`` and the squared lengths of ``count`` edges i0 + m, j0 + m.
+
+    Four running maxima: one waits for the comparison before it every edge.
+    """
+    a = b = c = d = longest
+    whole = count - count % 4
+    for m in range(0, whole, 4):
+        a = max(a, _squared(x, i0 + m, j0 + m))
+        b = max(b, _squared(x, i0 + m + 1, j0 + m + 1))
+        c = max(c, _squared(x, i0 + m + 2, j0 + m + 2))
+        d = max(d, _squared(x, i0 + m + 3, j0 + m + 3))
+    for m in range(whole, count):
+        a = max(a, _squared(x, i0 + m, j0 + m))
+    return max(max(a, b), max(c, d))
 
 
 @numba.njit(**JIT)
 def _longest_edge(x, rows, cols):
-    """Return the longest structural or diagonal edge of the triangles (m)."""
+    """
+    Return the longest structural or diagonal edge of the triangles (m).
+
+    One run of edges of one direction a row, without a bounds test per edge.
+    """
     longest = 0.0
     for r in range(rows):
-        for c in range(cols):
-            i = r * cols + c
-            for dr, dc in ((0, 1), (1, 0), (1, 1)):
-                if r + dr < rows and c + dc < cols:
-                    j = i + dr * cols + dc
-                    ex, ey, ez = x[0, j] - x[0, i], x[1, j] - x[1, i], x[2, j] - x[2, i]
-                    longest = max(longest, ex * ex + ey * ey + ez * ez)
+        i = r * cols
+        longest = _longest_edge_from(x, i, i + 1, cols - 1, longest)          # right
+        if r + 1 < rows:
+            longest = _longest_edge_from(x, i, i + cols, cols, longest)        # down
+            longest = _longest_edge_from(x, i, i + cols + 1, cols - 1, longest)  # diagonal
     return math.sqrt(longest)
 
 

@@ -1,0 +1,65 @@
+"""
+Self-contact's kernel calls step by step on the contact bench's folded drop.
+
+    .venv/bin/python tools/self_contact_calls.py [--size 129] [--steps 60] [--every 5]
+
+The folded cloth of ``hcloth_contact_bench`` (``multigrid``, thickness 4 mm, one numba
+thread) falls onto the ground; each self-contact kernel call of the finest level is timed
+and printed with the pairs its first detection found, how many points it was told had
+moved and whether it kept the patch boxes of the call before. Last, the median of a
+step's kernel time over all steps and over the steps from 20 on, once the layers rest
+on each other (where a step makes two calls: the step's own, and the one after the
+ground's rounds of strain limiting and contact).
+"""
+
+import argparse
+import time
+
+import numba
+import numpy as np
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
+    parser.add_argument('--size', type=int, default=129)
+    parser.add_argument('--steps', type=int, default=60)
+    parser.add_argument('--every', type=int, default=5, help='print every n-th step')
+    args = parser.parse_args(argv)
+    numba.set_num_threads(1)
+    from hcloth_ros.bench.self_contact import scene_setup
+    from hcloth_ros.core import make_solver
+    model, state, control = scene_setup(args.size, 'folded')
+    solver = make_solver('multigrid', model, thickness=0.004)
+    solver.step(state, control, 1 / 60)            # compile or load
+    finest = model.level_count - 1
+    kit = solver.kernels(finest)
+    calls = []
+
+    def timed(*arguments):
+        start = time.perf_counter()
+        result = kit.self_contact(*arguments)
+        # arguments 6 and -1: the moved-points mask and whether boxes are kept
+        calls[-1].append((time.perf_counter() - start, result[0],
+                          int(np.count_nonzero(arguments[6])), arguments[-1]))
+        return result
+
+    class Timed:
+
+        def __getattr__(self, name):
+            return timed if name == 'self_contact' else getattr(kit, name)
+
+    solver._kits[finest] = Timed()
+    for step in range(args.steps):
+        calls.append([])
+        solver.step(state, control, 1 / 60)
+        if step % args.every == 0:
+            print(f'step {step + 1}: ' + ' | '.join(
+                f'{1e3 * t:.2f} ms, {pairs} pairs, {moved} moved, boxes kept {kept}'
+                for t, pairs, moved, kept in calls[-1]), flush=True)
+    totals = [1e3 * sum(c[0] for c in step) for step in calls]
+    print(f'kernel a step: median {np.median(totals):.2f} ms over all {len(totals)} steps, '
+          f'{np.median(totals[20:]):.2f} ms from step 21 on')
+
+
+if __name__ == '__main__':
+    main()
