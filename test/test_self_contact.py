@@ -12,7 +12,7 @@ a triangle of the other layer to meet.
 from hcloth_ros.bench.self_contact import folded, GAP
 from hcloth_ros.core import ClothBuilder, Control, make_scene, make_solver, State
 from hcloth_ros.core import kernels
-from hcloth_ros.core.kernels.self_contact import patch_cache, RING
+from hcloth_ros.core.kernels.self_contact import _may_cross, patch_cache, RING
 import numpy as np
 import pytest
 
@@ -263,6 +263,69 @@ def test_kernel_leaves_a_sheet_with_nothing_near_bit_for_bit():
                                        THICKNESS, 0.3, 4, H, 10.0, *patch_cache(*lv.shape), False)
     assert pairs == 0
     assert np.array_equal(end, before) and not qd.any()
+
+
+def test_the_crossing_prefilter_keeps_every_sign_change():
+    """
+    A point whose side of a triangle's plane changes during a step is never filtered out.
+
+    Random linear motions of a point and a triangle (the point moving up to five times the
+    triangle's size), the side sampled at 2001 times of the step: wherever it changes,
+    ``_may_cross`` says it may; and it rules out most of those that keep their side (what
+    it is there for).
+    """
+    rng = np.random.default_rng(3)
+    t = np.linspace(0.0, 1.0, 2001)
+    changed = kept = ruled_out = 0
+    for case in range(4000):
+        # point 2 against triangle 0 (points 0, 1, 3) of a 2 x 2 grid
+        x0 = rng.uniform(-1.0, 1.0, (3, 4))
+        x1 = x0 + rng.uniform(-1.0, 1.0, (3, 4)) * (5.0 if case % 2 else 0.2)
+        at = x0[:, :, None] + (x1 - x0)[:, :, None] * t
+        a, b, c, p = at[:, 0], at[:, 1], at[:, 3], at[:, 2]
+        side = np.einsum('dt,dt->t', np.cross(b - a, c - a, axis=0), p - a)
+        may = _may_cross(x0, x1, 2, 0, 2)
+        if side.min() < 0.0 < side.max():
+            changed += 1
+            assert may, case
+        else:
+            kept += 1
+            ruled_out += not may
+    assert changed > 400 and kept > 400
+    assert ruled_out > 0.7 * kept
+
+
+def test_a_call_told_which_points_moved_finds_what_a_whole_call_finds():
+    """
+    A call told which points moved ends bit for bit where a call testing every pair ends.
+
+    The second call of a step, told which points moved since the first, tests only pairs
+    with one of them. The first call parts the pressed layers and leaves nothing near;
+    then a few points of the top layer are pushed back into the bottom one.
+    """
+    lv, start, end, qd, top = _pressed_layers(approach=0.3)
+    cache = patch_cache(*lv.shape)
+    dv = np.zeros_like(end)
+    hold, support = np.zeros(lv.shape, dtype=np.int8), _no_support(lv)
+    every = np.ones(lv.shape, dtype=np.bool_)
+    kernels.self_contact(end, qd, dv, start, lv.mass, hold, every, support, THICKNESS, 0.0,
+                         4, H, 10.0, *cache, False)
+    assert violations(start, end, THICKNESS) == (0, 0)
+    moved = np.zeros(lv.shape, dtype=np.bool_)
+    upper, _ = _flat_rows(top)
+    rows = np.arange(lv.shape[0])[upper][::3]
+    moved[rows, 5:9] = True
+    end[2, moved] -= 0.8 * THICKNESS
+    whole = [a.copy() for a in (end, qd, dv)]
+    told = kernels.self_contact(end, qd, dv, start, lv.mass, hold, moved, support,
+                                THICKNESS, 0.0, 4, H, 10.0, *cache, True)
+    every_pair = kernels.self_contact(*whole, start, lv.mass, hold, every, support,
+                                      THICKNESS, 0.0, 4, H, 10.0, *patch_cache(*lv.shape),
+                                      False)
+    assert told[0] >= moved.sum() and told == every_pair
+    for mine, theirs in zip((end, qd, dv), whole):
+        assert np.array_equal(mine, theirs)
+    assert violations(start, end, THICKNESS) == (0, 0)
 
 
 def _stepped(solver, state, control, steps, lowest=None):

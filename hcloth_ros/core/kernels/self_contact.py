@@ -426,6 +426,8 @@ def _pair_side(x0, x1, p, t, cols, thickness, substeps, shift):
     those (a point that went through and back) doubled the folded 129 x 129 drop's
     largest strain, since the tangle they leave behind is resolved later and worse.
     """
+    if not _may_cross(x0, x1, p, t, cols):
+        return _near(x1, p, t, cols, thickness)
     sda, na = _plane_at(x0, x1, p, t, cols, 0.0, shift)
     for sub in range(substeps):
         ta, tb = sub / substeps, (sub + 1) / substeps
@@ -438,7 +440,64 @@ def _pair_side(x0, x1, p, t, cols, thickness, substeps, shift):
 
 
 @numba.njit(**JIT)
-def _near_blocks(subs, shift, thickness, ai, aj, bi, bj, b_boxes, near, counts):
+def _norm1(x, y, z):
+    """Return ``|x| + |y| + |z|``."""
+    return abs(x) + abs(y) + abs(z)
+
+
+@numba.njit(**JIT)
+def _triple(ux, uy, uz, vx, vy, vz, wx, wy, wz):
+    """Return ``(u x v) . w``."""
+    return (uy * vz - uz * vy) * wx + (uz * vx - ux * vz) * wy + (ux * vy - uy * vx) * wz
+
+
+@numba.njit(**JIT)
+def _may_cross(x0, x1, p, t, cols):
+    """
+    Whether p's side of triangle t's plane may change during the step (False: it cannot).
+
+    Each point moves linearly, so the triple product ``((b - a) x (c - a)) . (p - a)``, the
+    plane's signed distance times twice the triangle's area, is a cubic in time; when the
+    four coefficients of its Bernstein form on [0, 1] share one sign, clear of rounding, it
+    keeps that sign, no sub-interval's test can find p crossing, and they are skipped (on
+    layers resting on each other most pairs a point tests). The frame's shift cancels in
+    the differences.
+    """
+    i, j, k = _triangle(t, cols)
+    ex, ey, ez = x0[0, j] - x0[0, i], x0[1, j] - x0[1, i], x0[2, j] - x0[2, i]
+    fx, fy, fz = x0[0, k] - x0[0, i], x0[1, k] - x0[1, i], x0[2, k] - x0[2, i]
+    gx, gy, gz = x0[0, p] - x0[0, i], x0[1, p] - x0[1, i], x0[2, p] - x0[2, i]
+    # the changes of those three differences over the step
+    dix, diy, diz = x1[0, i] - x0[0, i], x1[1, i] - x0[1, i], x1[2, i] - x0[2, i]
+    dex, dey, dez = x1[0, j] - x0[0, j] - dix, x1[1, j] - x0[1, j] - diy, \
+        x1[2, j] - x0[2, j] - diz
+    dfx, dfy, dfz = x1[0, k] - x0[0, k] - dix, x1[1, k] - x0[1, k] - diy, \
+        x1[2, k] - x0[2, k] - diz
+    dgx, dgy, dgz = x1[0, p] - x0[0, p] - dix, x1[1, p] - x0[1, p] - diy, \
+        x1[2, p] - x0[2, p] - diz
+    c0 = _triple(ex, ey, ez, fx, fy, fz, gx, gy, gz)
+    c1 = (_triple(dex, dey, dez, fx, fy, fz, gx, gy, gz)
+          + _triple(ex, ey, ez, dfx, dfy, dfz, gx, gy, gz)
+          + _triple(ex, ey, ez, fx, fy, fz, dgx, dgy, dgz))
+    c2 = (_triple(dex, dey, dez, dfx, dfy, dfz, gx, gy, gz)
+          + _triple(dex, dey, dez, fx, fy, fz, dgx, dgy, dgz)
+          + _triple(ex, ey, ez, dfx, dfy, dfz, dgx, dgy, dgz))
+    c3 = _triple(dex, dey, dez, dfx, dfy, dfz, dgx, dgy, dgz)
+    b1 = c0 + c1 / 3.0
+    b2 = c0 + (2.0 * c1 + c2) / 3.0
+    b3 = c0 + c1 + c2 + c3
+    # rounding: a margin of 1e-9 of the products' size (1-norms, which bound the lengths)
+    margin = 1e-9 * (_norm1(ex, ey, ez) + _norm1(dex, dey, dez)) \
+        * (_norm1(fx, fy, fz) + _norm1(dfx, dfy, dfz)) \
+        * (_norm1(gx, gy, gz) + _norm1(dgx, dgy, dgz))
+    low = min(min(c0, b1), min(b2, b3))
+    high = max(max(c0, b1), max(b2, b3))
+    return not (low > margin or high < -margin)
+
+
+@numba.njit(**JIT)
+def _near_blocks(subs, shift, thickness, ai, aj, bi, bj, fresh_blocks, b_boxes, near,
+                 counts):
     """
     List, for each block of patch A, the blocks of patch B its points may come near.
 
@@ -448,7 +507,8 @@ def _near_blocks(subs, shift, thickness, ai, aj, bi, bj, b_boxes, near, counts):
     patches with fewer) grown by ``thickness``. A point's path lies in its block's box,
     so a point tests only its block's list instead of every B block (760,000 box tests a
     detection on the fold demo's resting layers, 2 % of them met). ``b_boxes`` holds B's
-    boxes.
+    boxes. An A block with no vertex marked in ``fresh_blocks`` lists only the B blocks
+    with one (its points need no test against the others).
     """
     per = PATCH // SUB
     width = subs.shape[1]
@@ -468,7 +528,8 @@ def _near_blocks(subs, shift, thickness, ai, aj, bi, bj, b_boxes, near, counts):
             m = 0
             for si in range(s0, s1):
                 for sj in range(t0, t1):
-                    if _overlap(box, b_boxes[m]):
+                    if (fresh_blocks[ui, uj] or fresh_blocks[si, sj]) and \
+                            _overlap(box, b_boxes[m]):
                         near[a, counts[a]] = si * width + sj
                         counts[a] += 1
                     m += 1
@@ -476,16 +537,18 @@ def _near_blocks(subs, shift, thickness, ai, aj, bi, bj, b_boxes, near, counts):
 
 @numba.njit(**JIT)
 def _points_against(x0, x1, rows, cols, thickness, substeps, subs, shift, ai, aj, bi, bj,
-                    pairs, sides, count, b_boxes, near, counts):
+                    fresh, fresh_blocks, pairs, sides, count, b_boxes, near, counts):
     """
     Test patch A's points against patch B's triangles; returns the new pair count.
 
     Boxes are taken in the frame moving by ``shift`` (see :func:`_moving_box`); each
     point tests the B blocks of its own block's list (:func:`_near_blocks`, which fills
-    ``b_boxes``, ``near`` and ``counts``), in the order of the blocks.
+    ``b_boxes``, ``near`` and ``counts``), in the order of the blocks. Only pairs with a
+    point marked in ``fresh`` are tested (``fresh_blocks``: the blocks with a vertex
+    marked): the others have not moved since a detection found them apart.
     """
-    path, block = np.empty(6), np.empty(6)
-    _near_blocks(subs, shift, thickness, ai, aj, bi, bj, b_boxes, near, counts)
+    path = np.empty(6)
+    _near_blocks(subs, shift, thickness, ai, aj, bi, bj, fresh_blocks, b_boxes, near, counts)
     r0, r1 = ai * PATCH, min((ai + 1) * PATCH, rows - 1)
     c0, c1 = aj * PATCH, min((aj + 1) * PATCH, cols - 1)
     # the points a patch owns: its cells' top-left corners, and the grid's last row and
@@ -494,6 +557,7 @@ def _points_against(x0, x1, rows, cols, thickness, substeps, subs, shift, ai, aj
     c_end = c1 + 1 if c1 == cols - 1 else c1
     per = PATCH // SUB
     width = subs.shape[1]
+    b_width = min((bj + 1) * per, width) - bj * per
     u0, u_last = ai * per, min((ai + 1) * per, subs.shape[0]) - 1
     v0, v_last = aj * per, min((aj + 1) * per, subs.shape[1]) - 1
     for r in range(r0, r_end):
@@ -502,11 +566,15 @@ def _points_against(x0, x1, rows, cols, thickness, substeps, subs, shift, ai, aj
             if counts[a] == 0:
                 continue
             p = r * cols + c
+            moved = fresh[p]
             _path_box(x0, x1, p, shift, thickness, path)
             for e in range(counts[a]):
                 si, sj = near[a, e] // width, near[a, e] % width
-                _moving_box(subs[si, sj], shift, 0.0, block)
-                if not _overlap(path, block):
+                if not (moved or fresh_blocks[si, sj]):
+                    continue
+                # B's boxes in _near_blocks' order
+                m = (si - bi * per) * b_width + sj - bj * per
+                if not _overlap(path, b_boxes[m]):
                     continue
                 for u in range(si * SUB, min((si + 1) * SUB, rows - 1)):
                     for v in range(sj * SUB, min((sj + 1) * SUB, cols - 1)):
@@ -515,6 +583,8 @@ def _points_against(x0, x1, rows, cols, thickness, substeps, subs, shift, ai, aj
                             if _neighbours(p, t, cols):
                                 continue
                             i, j, k = _triangle(t, cols)
+                            if not (moved or fresh[i] or fresh[j] or fresh[k]):
+                                continue
                             if not _near_box(x0, x1, p, i, j, k, shift, thickness):
                                 continue
                             side = _pair_side(x0, x1, p, t, cols, thickness, substeps,
@@ -545,8 +615,8 @@ def _near_box(x0, x1, p, i, j, k, shift, thickness):
 
 
 @numba.njit(**JIT)
-def _detect(x0, x1, rows, cols, thickness, substeps, dirty, pairs, sides, boxes, ends,
-            cones):
+def _detect(x0, x1, rows, cols, thickness, substeps, dirty, fresh, pairs, sides, boxes,
+            ends, cones):
     """
     Collect (point, triangle) pairs and their sides over the step.
 
@@ -555,13 +625,16 @@ def _detect(x0, x1, rows, cols, thickness, substeps, dirty, pairs, sides, boxes,
     ``cones`` of :func:`_patch_boxes`, up to date); the pairs of patches left test points
     against triangles. Only pairs of patches with at least one marked in ``dirty`` are
     tested (after a response, those it moved a point of: elsewhere nothing changed since
-    the last detection). Returns how many pairs were found (those beyond the arrays'
-    capacity are not kept).
+    the last detection), and in them only the pairs with a point marked in ``fresh``
+    (after a response, the points of the pairs it moved; the other pairs of those patches
+    were apart at the last detection and have not moved since). Returns how many pairs
+    were found (those beyond the arrays' capacity are not kept).
     """
     pr, pc = boxes.shape[0], boxes.shape[1]
     box_a, box_b, shift = np.empty(6), np.empty(6), np.empty(3)
     # blocks' boxes, computed for the patches that meet another one
     subs = np.empty(((rows - 2) // SUB + 1, (cols - 2) // SUB + 1, 15))
+    fresh_blocks = _fresh_blocks(fresh, rows, cols, subs.shape[0], subs.shape[1])
     ready = np.zeros((pr, pc), dtype=np.bool_)
     # a patch pair's block lists (see _near_blocks)
     per = PATCH // SUB
@@ -598,13 +671,34 @@ def _detect(x0, x1, rows, cols, thickness, substeps, dirty, pairs, sides, boxes,
                     _sub_boxes(x0, x1, rows, cols, patch_i, patch_j, subs)
                     ready[patch_i, patch_j] = True
             count = _points_against(x0, x1, rows, cols, thickness, substeps, subs, shift,
-                                    ai, aj, bi, bj, pairs, sides, count, b_boxes, near,
-                                    counts)
+                                    ai, aj, bi, bj, fresh, fresh_blocks, pairs, sides,
+                                    count, b_boxes, near, counts)
             if a != b:
                 count = _points_against(x0, x1, rows, cols, thickness, substeps, subs, shift,
-                                        bi, bj, ai, aj, pairs, sides, count, b_boxes,
-                                        near, counts)
+                                        bi, bj, ai, aj, fresh, fresh_blocks, pairs, sides,
+                                        count, b_boxes, near, counts)
     return count
+
+
+@numba.njit(**JIT)
+def _fresh_blocks(fresh, rows, cols, block_rows, block_cols):
+    """
+    Return which blocks of ``SUB`` x ``SUB`` cells have a vertex marked in ``fresh``.
+
+    Block by block, stopping at the first marked vertex (after a solver's step every point
+    is marked: one read a block).
+    """
+    out = np.zeros((block_rows, block_cols), dtype=np.bool_)
+    for si in range(block_rows):
+        for sj in range(block_cols):
+            for r in range(si * SUB, min((si + 1) * SUB, rows - 1) + 1):
+                for c in range(sj * SUB, min((sj + 1) * SUB, cols - 1) + 1):
+                    if fresh[r * cols + c]:
+                        out[si, sj] = True
+                        break
+                if out[si, sj]:
+                    break
+    return out
 
 
 @numba.njit(**JIT)
@@ -867,10 +961,12 @@ def self_contact(
     # the first detection tests only the patches round the points marked moved (the
     # caller's: those that moved since its last call's first detection)
     dirty = np.zeros(((rows - 2) // PATCH + 1, (cols - 2) // PATCH + 1), dtype=np.bool_)
+    fresh = np.zeros(n, dtype=np.bool_)
     for r in range(rows):
         for c in range(cols):
             if moved[r, c]:
                 _mark_point(r * cols + c, rows, cols, dirty)
+                fresh[r * cols + c] = True
     if boxes.shape[0] != dirty.shape[0] or boxes.shape[1] != dirty.shape[1]:
         raise ValueError('self_contact: the patch cache does not fit the level')
     # the patches whose boxes are out of date: those round points that moved since they
@@ -885,8 +981,8 @@ def self_contact(
     for attempt in range(iterations + 1):
         # pushing a pair apart can bring a point near another triangle: detect again
         _patch_boxes(x0, x1, rows, cols, PATCH, thickness, boxes, ends, cones, stale)
-        found = _detect(x0, x1, rows, cols, thickness, substeps, dirty, pairs, sides, boxes,
-                        ends, cones)
+        found = _detect(x0, x1, rows, cols, thickness, substeps, dirty, fresh, pairs, sides,
+                        boxes, ends, cones)
         kept = min(found, pairs.shape[0])
         first = found if first < 0 else first
         dropped = max(dropped, found - kept)
@@ -896,11 +992,12 @@ def self_contact(
         # share vertices converges slowly (a fast fold left 1-3 of 300 pairs crossed
         # after 16 rounds)
         dirty[:, :] = False
+        fresh[:] = False
         for _ in range(RESOLVE_PASSES):
             for e in range(kept):
                 if _resolve(x0, x1, qdf, dvf, inv_mass, held_up, cols, pairs[e, 0],
                             pairs[e, 1], sides[e], target, friction, h, attempt == iterations):
-                    _mark_pair(pairs[e, 0], pairs[e, 1], rows, cols, dirty)
+                    _mark_pair(pairs[e, 0], pairs[e, 1], rows, cols, dirty, fresh)
         stale[:, :] = dirty
         touched |= dirty
     return first, substeps, dropped
@@ -914,11 +1011,12 @@ def patch_cache(rows, cols):
 
 
 @numba.njit(**JIT)
-def _mark_pair(p, t, rows, cols, dirty):
-    """Mark the patches of every cell around the point and the triangle's vertices."""
+def _mark_pair(p, t, rows, cols, dirty, fresh):
+    """Mark the point, the triangle's vertices and the patches of every cell round them."""
     i, j, k = _triangle(t, cols)
     for v in (p, i, j, k):
         _mark_point(v, rows, cols, dirty)
+        fresh[v] = True
 
 
 @numba.njit(**JIT)
