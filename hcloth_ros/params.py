@@ -228,6 +228,17 @@ def check_value(spec, value):
     return f'{spec.name} = {_short(value)}: {problem}; allowed: {allowed(spec)}'
 
 
+def assignments(pairs):
+    """Map ``NAME=VALUE`` strings (command-line overrides) to names and YAML values."""
+    out = {}
+    for pair in pairs:
+        name, sep, value = pair.partition('=')
+        if not sep or not name:
+            raise ValueError(f'{pair!r}: expected NAME=VALUE')
+        out[name] = yaml.safe_load(value)
+    return out
+
+
 def resolve(overrides=None):
     """Defaults updated by ``overrides``; unknown names and disallowed values refused."""
     values = {p.name: p.default for p in PARAMS}

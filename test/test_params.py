@@ -76,3 +76,12 @@ def test_self_contact_parameters_reach_the_solver():
     contact = params.build_solver(params.build_model(values), values).self_contact
     assert (contact.thickness, contact.friction, contact.iterations, contact.interval) == \
         (0.004, 0.2, 3, 2)
+
+
+def test_command_line_assignments_are_yaml_values():
+    assert params.assignments(['solver.dt=0.01', 'cloth.levels=5', 'a=null', 'b=[1, 2]',
+                               'c=x=y']) == {'solver.dt': 0.01, 'cloth.levels': 5,
+                                             'a': None, 'b': [1, 2], 'c': 'x=y'}
+    for bad in ('solver.dt', '=1'):
+        with pytest.raises(ValueError, match='expected NAME=VALUE'):
+            params.assignments([bad])

@@ -29,7 +29,6 @@ from hcloth_ros.demo.fold_metrics import describe, fold_metrics
 from hcloth_ros.grippers import GripperBank, points_within
 from hcloth_ros.simulation import Simulation
 import numpy as np
-import yaml
 
 RADIUS = 0.03       # m: the fold scene's grasp_radius
 NAMES = ('left', 'right')
@@ -102,10 +101,7 @@ def main(argv=None):
                         help='a parameter override (YAML value), repeatable')
     args = parser.parse_args(argv)
     fold_client.LIFT, fold_client.SHORT = args.lift, args.stop_short
-    overrides = {}
-    for assignment in args.param:
-        name, value = assignment.split('=', 1)
-        overrides[name] = yaml.safe_load(value)
+    overrides = params.assignments(args.param)
     for seed in range(args.seed, args.seed + args.runs):
         start = time.perf_counter()
         before, after = run(seed, not args.translate_only, overrides)

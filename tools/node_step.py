@@ -16,7 +16,6 @@ import time
 
 import numba
 import numpy as np
-import yaml
 
 
 def main(argv=None):
@@ -32,11 +31,7 @@ def main(argv=None):
     from hcloth_ros.core import warm_up
     from hcloth_ros.core.recovery import step_with_retries
     numba.set_num_threads(args.threads)
-    overrides = {}
-    for assignment in args.param:
-        name, value = assignment.split('=', 1)
-        overrides[name] = yaml.safe_load(value)
-    values = params.resolve(overrides)
+    values = params.resolve(params.assignments(args.param))
     warm_up(solvers=[values['solver.name']], parallel=args.threads > 1, energy=False)
     model, solver, state, control = params.build_all(values)
     if hasattr(solver, 'set_finest_level'):

@@ -34,18 +34,8 @@ import tempfile
 import time
 
 import numba
-import yaml
 
 TEN_MINUTES = 600.0
-
-
-def _assignments(pairs):
-    """Map ``NAME=VALUE`` strings to names and YAML values."""
-    out = {}
-    for pair in pairs:
-        name, value = pair.split('=', 1)
-        out[name] = yaml.safe_load(value)
-    return out
 
 
 def _node_default(name):
@@ -203,13 +193,15 @@ def main(argv=None):
         _report(args.file, seconds, ticks)
         return
     numba.set_num_threads(args.threads)
+    from hcloth_ros import params
     options = {'finest_every': _node_default('rerun_finest_every'),
-               **_assignments(args.option)}
+               **params.assignments(args.option)}
     lod_level = _node_default('lod_level') if args.lod_level is None else args.lod_level
     with tempfile.TemporaryDirectory() as tmp:
         path = os.path.join(tmp, 'run.rrd')
         pace = 0.0 if args.no_pace else _node_default('real_time_factor')
-        ticks = record(path, args.seconds, _assignments(args.param), options, lod_level, pace)
+        ticks = record(path, args.seconds, params.assignments(args.param), options,
+                       lod_level, pace)
         if args.keep:
             shutil.copyfile(path, args.keep)
         print(f'Recorder options {options}, lod_level {lod_level}')

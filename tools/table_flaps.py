@@ -12,6 +12,7 @@ or not: see the load), for each solver given.
     .venv/bin/python tools/table_flaps.py --levels 2 --k-bend 0 multigrid
     .venv/bin/python tools/table_flaps.py multigrid hierarchical --levels 3 --contact-rounds 0 16
     .venv/bin/python tools/table_flaps.py multigrid --levels 5 --contact-rounds 16
+    .venv/bin/python tools/table_flaps.py multigrid --levels 5 --option strain_refine_iterations=30
 """
 
 import argparse
@@ -20,15 +21,17 @@ import time
 from hcloth_ros.core import ClothBuilder, Control, make_solver, Placement, State
 from hcloth_ros.core.kernels.layout import STENCIL_DC, STENCIL_DR
 from hcloth_ros.core.scene import make_scene
+from hcloth_ros.params import assignments
 import numpy as np
 
 TABLE = (0.0, 0.0, 0.35, 0.3, 0.3, 0.35)      # centre xyz, half extents xyz (m)
 OPTIONS = {'implicit': {'tolerance': 1e-4, 'strain_limit': None}}
 
 
-def flaps(solver_name, levels, k_bend, contact_rounds=16, seconds=4.0, dt=1 / 60):
+def flaps(solver_name, levels, k_bend, contact_rounds=16, seconds=4.0, dt=1 / 60,
+          extra=None):
     """
-    Drop the cloth and measure it.
+    Drop the cloth and measure it (``extra``: more solver options).
 
     Returns the flaps' lowest and highest z (m) or None, the largest strain over the run,
     its range over the last 3 s, in the last step, where the most stretched finest spring
@@ -39,7 +42,7 @@ def flaps(solver_name, levels, k_bend, contact_rounds=16, seconds=4.0, dt=1 / 60
                          k_bend=k_bend, placement=Placement(origin=(-0.5, -0.5, 1.0))).finalize()
     state, control = State.at_rest(model), Control(model)
     solver = make_solver(solver_name, model, contact_rounds=contact_rounds,
-                         **OPTIONS.get(solver_name, {}))
+                         **OPTIONS.get(solver_name, {}), **(extra or {}))
     worst, steps, start = 0.0, int(round(seconds / dt)), time.perf_counter()
     late = []
     for i in range(steps):
@@ -87,11 +90,15 @@ def main(argv=None):
     parser.add_argument('--k-bend', type=float, default=100.0, help='N/m')
     parser.add_argument('--contact-rounds', type=int, nargs='+', default=[16],
                         help="the solvers' contact_rounds, each in turn")
+    parser.add_argument('--option', action='append', default=[], metavar='NAME=VALUE',
+                        help='a solver option (a YAML value) for every solver, repeatable, '
+                             'e.g. strain_refine_iterations=30')
     args = parser.parse_args(argv)
+    extra = assignments(args.option)
     for rounds in args.contact_rounds:
         for name in args.solvers:
             heights, worst, late, last, spot, seconds = flaps(
-                name, args.levels, args.k_bend, rounds)
+                name, args.levels, args.k_bend, rounds, extra=extra)
             where = ('no point beyond 0.45 m: the flaps hang inside it' if heights is None
                      else f'flaps at z = {heights[0]:.3f} .. {heights[1]:.3f} m')
             print(f'{name:12s} contact_rounds {rounds:3d}: {where}; largest strain '

@@ -27,13 +27,13 @@ the thread count and the load average. The kernel is serial: one thread whatever
 """
 
 import argparse
-import ast
 import json
 import os
 import time
 
 from hcloth_ros.bench.scenarios import build_model, prepare
 from hcloth_ros.core import Control, make_scene, make_solver, State
+from hcloth_ros.params import assignments
 import numba
 import numpy as np
 
@@ -176,13 +176,10 @@ def main(argv=None):
                         help='contact_rounds values for the finger scene, comma-separated')
     parser.add_argument('--json', help='also write the figures to this file')
     parser.add_argument('--option', action='append', default=[], metavar='NAME=VALUE',
-                        help='a multigrid solver option (a Python literal), repeatable, '
+                        help='a multigrid solver option (a YAML value), repeatable, '
                              'e.g. max_newton_iterations=3')
     args = parser.parse_args(argv)
-    extra = {}
-    for assignment in args.option:
-        name, value = assignment.split('=', 1)
-        extra[name] = ast.literal_eval(value)
+    extra = assignments(args.option)
     print(f'contact cost: self-contact thickness {args.thickness * 1e3:g} mm, multigrid '
           f'{extra or ""}, '
           f'{numba.get_num_threads()} numba thread(s), load average '
