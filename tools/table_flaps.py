@@ -13,6 +13,12 @@ or not: see the load), for each solver given.
     .venv/bin/python tools/table_flaps.py multigrid hierarchical --levels 3 --contact-rounds 0 16
     .venv/bin/python tools/table_flaps.py multigrid --levels 5 --contact-rounds 16
     .venv/bin/python tools/table_flaps.py multigrid --levels 5 --option strain_refine_iterations=30
+    .venv/bin/python tools/table_flaps.py multigrid --levels 5 --option accurate_level=3 --edge
+
+``--edge`` also prints, for each level from 33 x 33 up, the strain at the end of the
+structural springs that bridge the table's edge (one end on the top, the other on a side
+face, each within 1.5 mm of the grown box's surface) and of those lying on the top and on
+the sides; ``--friction`` sets the table's and the ground's friction coefficient.
 """
 
 import argparse
@@ -25,19 +31,21 @@ from hcloth_ros.params import assignments
 import numpy as np
 
 TABLE = (0.0, 0.0, 0.35, 0.3, 0.3, 0.35)      # centre xyz, half extents xyz (m)
+MARGIN = 0.002                                # m
 OPTIONS = {'implicit': {'tolerance': 1e-4, 'strain_limit': None}}
 
 
 def flaps(solver_name, levels, k_bend, contact_rounds=16, seconds=4.0, dt=1 / 60,
-          extra=None):
+          extra=None, friction=0.5):
     """
     Drop the cloth and measure it (``extra``: more solver options).
 
     Returns the flaps' lowest and highest z (m) or None, the largest strain over the run,
     its range over the last 3 s, in the last step, where the most stretched finest spring
-    is at the end (x, y, z of its first point), and the mean seconds a step took.
+    is at the end (x, y, z of its first point), the mean seconds a step took, and the
+    model and state at the end.
     """
-    scene = make_scene(ground_z=0.0, boxes=[TABLE], friction=0.5, margin=0.002)
+    scene = make_scene(ground_z=0.0, boxes=[TABLE], friction=friction, margin=MARGIN)
     model = ClothBuilder(resolution=(9, 9), level_count=levels, scene=scene, air_drag=1.0,
                          k_bend=k_bend, placement=Placement(origin=(-0.5, -0.5, 1.0))).finalize()
     state, control = State.at_rest(model), Control(model)
@@ -56,7 +64,8 @@ def flaps(solver_name, levels, k_bend, contact_rounds=16, seconds=4.0, dt=1 / 60
     points = state.points(levels - 1)
     flap = points[np.abs(points[:, 0]) > 0.45, 2]
     return ((float(flap.min()), float(flap.max())) if flap.size else None, worst,
-            (min(late), max(late)), report.max_strain, _most_stretched(model, state), seconds)
+            (min(late), max(late)), report.max_strain, _most_stretched(model, state), seconds,
+            model, state)
 
 
 def _most_stretched(model, state):
@@ -83,6 +92,44 @@ def _most_stretched(model, state):
     return where
 
 
+def edge_springs(model, state, first=2):
+    """
+    Strains of the structural springs across the table's edge, on its top and on its sides.
+
+    For each level from ``first`` up: ``(level, across, top, sides)``, each an array of
+    strains at the end. A point is on the top (on a side) when it lies within 1.5 mm of
+    the grown box's top face (of a side face, below the top).
+    """
+    cx, cy, _, hx, hy, hz = TABLE
+    top_z = TABLE[2] + hz + MARGIN
+    out = []
+    for k in range(first, model.level_count):
+        q, rest = state.q[k], model.level(k).rest
+        rows, cols = q.shape[1:]
+        top = np.abs(q[2] - top_z) < 0.0015
+        side = ((np.abs(np.abs(q[0] - cx) - hx - MARGIN) < 0.0015)
+                | (np.abs(np.abs(q[1] - cy) - hy - MARGIN) < 0.0015)) & (q[2] < top_z - 0.0015)
+        across, on_top, on_sides = [], [], []
+        for s in (0, 2):        # the structural springs along rows and along columns
+            dr, dc = STENCIL_DR[s], STENCIL_DC[s]
+            a = (slice(0, rows - dr), slice(0, cols - dc))
+            b = (slice(dr, rows), slice(dc, cols))
+            strain = np.linalg.norm(q[(slice(None),) + b] - q[(slice(None),) + a],
+                                    axis=0) / rest[s] - 1.0
+            across.append(strain[(top[a] & side[b]) | (side[a] & top[b])])
+            on_top.append(strain[top[a] & top[b]])
+            on_sides.append(strain[side[a] & side[b]])
+        out.append((k, *(np.concatenate(x) for x in (across, on_top, on_sides))))
+    return out
+
+
+def _summary(strains):
+    if not strains.size:
+        return 'none'
+    return (f'{strains.size} springs, mean {strains.mean():.3f}, '
+            f'{strains.min():.3f} .. {strains.max():.3f}')
+
+
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
     parser.add_argument('solvers', nargs='+')
@@ -93,18 +140,28 @@ def main(argv=None):
     parser.add_argument('--option', action='append', default=[], metavar='NAME=VALUE',
                         help='a solver option (a YAML value) for every solver, repeatable, '
                              'e.g. strain_refine_iterations=30')
+    parser.add_argument('--friction', type=float, default=0.5,
+                        help="the table's and the ground's friction coefficient")
+    parser.add_argument('--edge', action='store_true',
+                        help="print the strains of the springs across the table's edge")
     args = parser.parse_args(argv)
     extra = assignments(args.option)
     for rounds in args.contact_rounds:
         for name in args.solvers:
-            heights, worst, late, last, spot, seconds = flaps(
-                name, args.levels, args.k_bend, rounds, extra=extra)
+            heights, worst, late, last, spot, seconds, model, state = flaps(
+                name, args.levels, args.k_bend, rounds, extra=extra, friction=args.friction)
             where = ('no point beyond 0.45 m: the flaps hang inside it' if heights is None
                      else f'flaps at z = {heights[0]:.3f} .. {heights[1]:.3f} m')
             print(f'{name:12s} contact_rounds {rounds:3d}: {where}; largest strain '
                   f'{worst:.3f} over the run, {late[0]:.3f} .. {late[1]:.3f} over the last '
                   f'3 s, {last:.3f} at the end (most stretched spring from '
                   f'{np.round(spot, 3)} m); {seconds * 1e3:.1f} ms a step', flush=True)
+            for k, across, on_top, on_sides in (edge_springs(model, state) if args.edge
+                                                else ()):
+                rows, cols = model.level(k).shape
+                print(f'    level {k} ({rows} x {cols}) strain at the end: across the edge '
+                      f'{_summary(across)}; on the top {_summary(on_top)}; on the sides '
+                      f'{_summary(on_sides)}', flush=True)
 
 
 if __name__ == '__main__':
