@@ -18,7 +18,8 @@ or not: see the load), for each solver given.
 ``--edge`` also prints, for each level from 33 x 33 up, the strain at the end of the
 structural springs that bridge the table's edge (one end on the top, the other on a side
 face, each within 1.5 mm of the grown box's surface) and of those lying on the top and on
-the sides; ``--friction`` sets the table's and the ground's friction coefficient.
+the sides; ``--friction`` sets the table's and the ground's friction coefficient,
+``--contraction`` the springs' resistance to compression.
 """
 
 import argparse
@@ -36,9 +37,12 @@ OPTIONS = {'implicit': {'tolerance': 1e-4, 'strain_limit': None}}
 
 
 def flaps(solver_name, levels, k_bend, contact_rounds=16, seconds=4.0, dt=1 / 60,
-          extra=None, friction=0.5):
+          extra=None, friction=0.5, contraction=None):
     """
-    Drop the cloth and measure it (``extra``: more solver options).
+    Drop the cloth and measure it.
+
+    ``extra``: more solver options; ``contraction``: the springs' resistance to
+    compression, one value per level (default 1).
 
     Returns the flaps' lowest and highest z (m) or None, the largest strain over the run,
     its range over the last 3 s, in the last step, where the most stretched finest spring
@@ -47,7 +51,8 @@ def flaps(solver_name, levels, k_bend, contact_rounds=16, seconds=4.0, dt=1 / 60
     """
     scene = make_scene(ground_z=0.0, boxes=[TABLE], friction=friction, margin=MARGIN)
     model = ClothBuilder(resolution=(9, 9), level_count=levels, scene=scene, air_drag=1.0,
-                         k_bend=k_bend, placement=Placement(origin=(-0.5, -0.5, 1.0))).finalize()
+                         k_bend=k_bend, contraction=contraction,
+                         placement=Placement(origin=(-0.5, -0.5, 1.0))).finalize()
     state, control = State.at_rest(model), Control(model)
     solver = make_solver(solver_name, model, contact_rounds=contact_rounds,
                          **OPTIONS.get(solver_name, {}), **(extra or {}))
@@ -142,6 +147,9 @@ def main(argv=None):
                              'e.g. strain_refine_iterations=30')
     parser.add_argument('--friction', type=float, default=0.5,
                         help="the table's and the ground's friction coefficient")
+    parser.add_argument('--contraction', type=float, nargs='+',
+                        help="the springs' resistance to compression in [0, 1], one value "
+                             'per level, coarsest first (default 1 on every level)')
     parser.add_argument('--edge', action='store_true',
                         help="print the strains of the springs across the table's edge")
     args = parser.parse_args(argv)
@@ -149,7 +157,8 @@ def main(argv=None):
     for rounds in args.contact_rounds:
         for name in args.solvers:
             heights, worst, late, last, spot, seconds, model, state = flaps(
-                name, args.levels, args.k_bend, rounds, extra=extra, friction=args.friction)
+                name, args.levels, args.k_bend, rounds, extra=extra, friction=args.friction,
+                contraction=args.contraction)
             where = ('no point beyond 0.45 m: the flaps hang inside it' if heights is None
                      else f'flaps at z = {heights[0]:.3f} .. {heights[1]:.3f} m')
             print(f'{name:12s} contact_rounds {rounds:3d}: {where}; largest strain '
