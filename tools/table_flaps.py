@@ -12,7 +12,7 @@ or not: see the load), for each solver given.
     .venv/bin/python tools/table_flaps.py --levels 2 --k-bend 0 multigrid
     .venv/bin/python tools/table_flaps.py multigrid hierarchical --levels 3 --contact-rounds 0 16
     .venv/bin/python tools/table_flaps.py multigrid --levels 5 --contact-rounds 16
-    .venv/bin/python tools/table_flaps.py multigrid --levels 5 --option strain_refine_iterations=30
+    .venv/bin/python tools/table_flaps.py multigrid --levels 5 --option contact_sweeps=40
     .venv/bin/python tools/table_flaps.py multigrid --levels 5 --option accurate_level=3 --edge
 
 ``--edge`` also prints, for each level from 33 x 33 up, the strain at the end of the
