@@ -30,6 +30,7 @@ import time
 
 from hcloth_ros.core import buffers, kernels
 from hcloth_ros.core.control import FREE
+from hcloth_ros.core.kernels import contact_strain as on_surface
 from hcloth_ros.core.scene import MARGIN
 from hcloth_ros.core.self_contact import SelfContact
 import numba
@@ -37,6 +38,7 @@ import numpy as np
 
 
 EXTERNAL_MODES = ('exact', 'literal')
+CONTACT_STRAIN = ('jacobi', 'tangent')
 NO_PLANES = np.zeros((0, 4))
 NO_PLANES.setflags(write=False)     # as a scene's planes: one compiled signature
 
@@ -94,6 +96,11 @@ class Solver:
         finest simulated level touched an obstacle, most rounds of strain limiting (this
         many sweeps, every point free) and contact on it, the coarser levels taking the
         finest state at the end of the step (:meth:`_wrap`); 0 rounds: none.
+    :param contact_strain: the rounds' strain limiting: ``'jacobi'`` (the level's own,
+        :mod:`~hcloth_ros.core.kernels.strain`) or ``'tangent'`` (Gauss-Seidel, points lying
+        on an obstacle moved along its surface: :mod:`~hcloth_ros.core.kernels.
+        contact_strain`; its sweeps stop once every spring is within the limit, so give it
+        more, e.g. ``contact_sweeps=100``).
     """
 
     name = ''
@@ -101,7 +108,8 @@ class Solver:
     def __init__(self, model, external='exact', strain_limit=0.1, strain_iterations=100,
                  strain_refine_iterations=4, strain_tolerance=0.005, blowup_strain=10.0,
                  builds=None, thickness=None, self_friction=0.3, self_contact_iterations=8,
-                 self_contact_interval=1, contact_rounds=16, contact_sweeps=10):
+                 self_contact_interval=1, contact_rounds=16, contact_sweeps=10,
+                 contact_strain='jacobi'):
         if external not in EXTERNAL_MODES:
             raise ValueError(f'external must be one of {EXTERNAL_MODES}, got {external!r}')
         if strain_limit is not None and not (0.0 < strain_limit < 10.0):
@@ -113,6 +121,9 @@ class Solver:
                 raise ValueError(f'{name} must be in 1..10000, got {value}')
         if not (0 <= int(contact_rounds) <= 10000):
             raise ValueError(f'contact_rounds must be in 0..10000, got {contact_rounds}')
+        if contact_strain not in CONTACT_STRAIN:
+            raise ValueError(f'contact_strain must be one of {CONTACT_STRAIN}, '
+                             f'got {contact_strain!r}')
         if not (0.0 < strain_tolerance < 1.0):
             raise ValueError(f'strain_tolerance must be in (0, 1), got {strain_tolerance}')
         if not (blowup_strain > 0):
@@ -134,6 +145,7 @@ class Solver:
         self.strain_tolerance = float(strain_tolerance)
         self.contact_rounds = int(contact_rounds)
         self.contact_sweeps = int(contact_sweeps)
+        self.contact_strain = contact_strain
         self.blowup_strain = float(blowup_strain)
         shapes = [(3, lv.rows, lv.cols) for lv in model.levels]
         self._q = [buffers.zeros(s) for s in shapes]
@@ -268,12 +280,10 @@ class Solver:
         65 x 65 the peak strain fell from 0.22, the finest level alone wrapping, to 0.134);
         the coarser levels take the finest result at the end (:meth:`_inject_down`).
         """
-        lv, kit = self.model.level(k), self.kernels(k)
+        kit = self.kernels(k)
         done = 0
         for rounds in range(1, self.contact_rounds + 1):
-            if not kit.strain_limit(self._q[k], self._qd[k], self._dv[k], lv.rest, holds.kind,
-                                    False, limit, self.contact_sweeps, self.strain_tolerance,
-                                    h, self._scratch[k]):
+            if not self._round_strain_limit(k, holds, h, limit, scene):
                 break   # within the limit, and the last contact left nothing inside
             done = rounds
             pushes = 0
@@ -291,6 +301,18 @@ class Solver:
             self._pbd_velocity(k, state, integrated, h)
             self._inject = True
         return done
+
+    def _round_strain_limit(self, k, holds, h, limit, scene):
+        """Strain limiting of one contact round on level k; returns the sweeps that corrected."""
+        lv = self.model.level(k)
+        if self.contact_strain == 'jacobi' or scene is None:
+            return self.kernels(k).strain_limit(
+                self._q[k], self._qd[k], self._dv[k], lv.rest, holds.kind, False, limit,
+                self.contact_sweeps, self.strain_tolerance, h, self._scratch[k])
+        return on_surface.tangent_strain_limit(
+            self._q[k], self._qd[k], self._dv[k], lv.rest, holds.kind, scene.planes,
+            scene.boxes, scene.spheres, scene.margin, limit, self.contact_sweeps,
+            self.strain_tolerance, h)
 
     def _pbd_velocity(self, k, state, integrated, h):
         """
