@@ -58,13 +58,14 @@ def test_the_table_edge_strain_holds_at_65_by_65():
 
 def test_strain_limiting_along_the_table_holds_the_edge_at_129_by_129():
     """
-    Over the last 3 s under 1.5 x the 10 % limit with ``contact_strain='tangent'``.
+    Under 1.5 x the 10 % limit over the whole drop with ``contact_strain='tangent'``.
 
-    0.132 measured (0.34 with the rounds' Jacobi strain limiting, whose corrections of the
-    springs across the edge contact undoes); over the landing 0.171, above 0.15.
+    With up to 300 sweeps a round: 0.115 measured (0.77 with the rounds' Jacobi strain
+    limiting, whose corrections of the springs across the edge contact undoes; with 100
+    sweeps 0.171 at the landing, 0.132 over the last 3 s).
     """
-    assert _table_strain(16, levels=5, late=True, contact_strain='tangent',
-                         contact_sweeps=100) < 1.5 * 0.1
+    assert _table_strain(16, levels=5, contact_strain='tangent',
+                         contact_sweeps=300) < 1.5 * 0.1
 
 
 def test_the_tangent_strain_limiting_keeps_a_spring_across_an_edge_on_its_faces():
