@@ -82,19 +82,31 @@ def _most_stretched(model, state):
     """
     k = model.level_count - 1
     q, rest = state.q[k], model.level(k).rest
-    rows, cols = q.shape[1:]
     best, where = -1.0, None
     for s in range(0, 8, 2):
-        dr, dc = STENCIL_DR[s], STENCIL_DC[s]
-        r0, c0 = max(0, -dr), max(0, -dc)
-        r1, c1 = rows - max(0, dr), cols - max(0, dc)
-        a = q[:, r0:r1, c0:c1]
-        b = q[:, r0 + dr:r1 + dr, c0 + dc:c1 + dc]
-        strain = np.linalg.norm(b - a, axis=0) / rest[s] - 1.0
+        strain, first, _ = _strains(q, rest, s)
         i = np.unravel_index(np.argmax(strain), strain.shape)
         if strain[i] > best:
-            best, where = strain[i], a[:, i[0], i[1]]
+            best, where = strain[i], q[(slice(None),) + first][:, i[0], i[1]]
     return where
+
+
+def _strains(q, rest, s):
+    """
+    Strains of a level's springs of stencil direction s.
+
+    Returns them (an array over the springs' first points) and the index slices of their
+    first and second points in the level's grid.
+    """
+    rows, cols = q.shape[1:]
+    dr, dc = STENCIL_DR[s], STENCIL_DC[s]
+    r0, c0 = max(0, -dr), max(0, -dc)
+    r1, c1 = rows - max(0, dr), cols - max(0, dc)
+    first = (slice(r0, r1), slice(c0, c1))
+    second = (slice(r0 + dr, r1 + dr), slice(c0 + dc, c1 + dc))
+    strain = np.linalg.norm(q[(slice(None),) + second] - q[(slice(None),) + first],
+                            axis=0) / rest[s] - 1.0
+    return strain, first, second
 
 
 def edge_springs(model, state, first=2):
@@ -110,17 +122,12 @@ def edge_springs(model, state, first=2):
     out = []
     for k in range(first, model.level_count):
         q, rest = state.q[k], model.level(k).rest
-        rows, cols = q.shape[1:]
         top = np.abs(q[2] - top_z) < 0.0015
         side = ((np.abs(np.abs(q[0] - cx) - hx - MARGIN) < 0.0015)
                 | (np.abs(np.abs(q[1] - cy) - hy - MARGIN) < 0.0015)) & (q[2] < top_z - 0.0015)
         across, on_top, on_sides = [], [], []
         for s in (0, 2):        # the structural springs along rows and along columns
-            dr, dc = STENCIL_DR[s], STENCIL_DC[s]
-            a = (slice(0, rows - dr), slice(0, cols - dc))
-            b = (slice(dr, rows), slice(dc, cols))
-            strain = np.linalg.norm(q[(slice(None),) + b] - q[(slice(None),) + a],
-                                    axis=0) / rest[s] - 1.0
+            strain, a, b = _strains(q, rest, s)
             across.append(strain[(top[a] & side[b]) | (side[a] & top[b])])
             on_top.append(strain[top[a] & top[b]])
             on_sides.append(strain[side[a] & side[b]])

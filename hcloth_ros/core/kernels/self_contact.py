@@ -615,8 +615,8 @@ def _near_box(x0, x1, p, i, j, k, shift, thickness):
 
 
 @numba.njit(**JIT)
-def _detect(x0, x1, rows, cols, thickness, substeps, dirty, fresh, pairs, sides, boxes,
-            ends, cones):
+def _detect(x0, x1, rows, cols, thickness, substeps, dirty, fresh, fresh_blocks, pairs,
+            sides, boxes, ends, cones):
     """
     Collect (point, triangle) pairs and their sides over the step.
 
@@ -627,14 +627,14 @@ def _detect(x0, x1, rows, cols, thickness, substeps, dirty, fresh, pairs, sides,
     tested (after a response, those it moved a point of: elsewhere nothing changed since
     the last detection), and in them only the pairs with a point marked in ``fresh``
     (after a response, the points of the pairs it moved; the other pairs of those patches
-    were apart at the last detection and have not moved since). Returns how many pairs
-    were found (those beyond the arrays' capacity are not kept).
+    were apart at the last detection and have not moved since; ``fresh_blocks``: see
+    :func:`_fresh_blocks`). Returns how many pairs were found (those beyond the arrays'
+    capacity are not kept).
     """
     pr, pc = boxes.shape[0], boxes.shape[1]
     box_a, box_b, shift = np.empty(6), np.empty(6), np.empty(3)
     # blocks' boxes, computed for the patches that meet another one
-    subs = np.empty(((rows - 2) // SUB + 1, (cols - 2) // SUB + 1, 15))
-    fresh_blocks = _fresh_blocks(fresh, rows, cols, subs.shape[0], subs.shape[1])
+    subs = np.empty(fresh_blocks.shape + (15,))
     ready = np.zeros((pr, pc), dtype=np.bool_)
     # a patch pair's block lists (see _near_blocks)
     per = PATCH // SUB
@@ -681,13 +681,14 @@ def _detect(x0, x1, rows, cols, thickness, substeps, dirty, fresh, pairs, sides,
 
 
 @numba.njit(**JIT)
-def _fresh_blocks(fresh, rows, cols, block_rows, block_cols):
+def _fresh_blocks(fresh, rows, cols):
     """
     Return which blocks of ``SUB`` x ``SUB`` cells have a vertex marked in ``fresh``.
 
     Block by block, stopping at the first marked vertex (after a solver's step every point
     is marked: one read a block).
     """
+    block_rows, block_cols = (rows - 2) // SUB + 1, (cols - 2) // SUB + 1
     out = np.zeros((block_rows, block_cols), dtype=np.bool_)
     for si in range(block_rows):
         for sj in range(block_cols):
@@ -958,15 +959,12 @@ def self_contact(
     pairs = np.empty((PAIRS_PER_POINT * n, 2), dtype=np.int64)
     sides = np.empty(PAIRS_PER_POINT * n)
     first, dropped = -1, 0
-    # the first detection tests only the patches round the points marked moved (the
-    # caller's: those that moved since its last call's first detection)
+    # the first detection tests only round the points marked moved (the caller's: those
+    # that moved since its last call's first detection)
+    fresh = moved.copy().reshape(n)
+    fresh_blocks = _fresh_blocks(fresh, rows, cols)
     dirty = np.zeros(((rows - 2) // PATCH + 1, (cols - 2) // PATCH + 1), dtype=np.bool_)
-    fresh = np.zeros(n, dtype=np.bool_)
-    for r in range(rows):
-        for c in range(cols):
-            if moved[r, c]:
-                _mark_point(r * cols + c, rows, cols, dirty)
-                fresh[r * cols + c] = True
+    _dirty_patches(fresh_blocks, dirty)
     if boxes.shape[0] != dirty.shape[0] or boxes.shape[1] != dirty.shape[1]:
         raise ValueError('self_contact: the patch cache does not fit the level')
     # the patches whose boxes are out of date: those round points that moved since they
@@ -981,8 +979,8 @@ def self_contact(
     for attempt in range(iterations + 1):
         # pushing a pair apart can bring a point near another triangle: detect again
         _patch_boxes(x0, x1, rows, cols, PATCH, thickness, boxes, ends, cones, stale)
-        found = _detect(x0, x1, rows, cols, thickness, substeps, dirty, fresh, pairs, sides,
-                        boxes, ends, cones)
+        found = _detect(x0, x1, rows, cols, thickness, substeps, dirty, fresh, fresh_blocks,
+                        pairs, sides, boxes, ends, cones)
         kept = min(found, pairs.shape[0])
         first = found if first < 0 else first
         dropped = max(dropped, found - kept)
@@ -991,13 +989,14 @@ def self_contact(
         # the last round moves points alone: Gauss-Seidel over a cluster of pairs that
         # share vertices converges slowly (a fast fold left 1-3 of 300 pairs crossed
         # after 16 rounds)
-        dirty[:, :] = False
         fresh[:] = False
         for _ in range(RESOLVE_PASSES):
             for e in range(kept):
                 if _resolve(x0, x1, qdf, dvf, inv_mass, held_up, cols, pairs[e, 0],
                             pairs[e, 1], sides[e], target, friction, h, attempt == iterations):
-                    _mark_pair(pairs[e, 0], pairs[e, 1], rows, cols, dirty, fresh)
+                    _mark_pair(pairs[e, 0], pairs[e, 1], cols, fresh)
+        fresh_blocks = _fresh_blocks(fresh, rows, cols)
+        _dirty_patches(fresh_blocks, dirty)
         stale[:, :] = dirty
         touched |= dirty
     return first, substeps, dropped
@@ -1011,19 +1010,19 @@ def patch_cache(rows, cols):
 
 
 @numba.njit(**JIT)
-def _mark_pair(p, t, rows, cols, dirty, fresh):
-    """Mark the point, the triangle's vertices and the patches of every cell round them."""
+def _mark_pair(p, t, cols, fresh):
+    """Mark the point and the triangle's vertices in ``fresh``."""
     i, j, k = _triangle(t, cols)
     for v in (p, i, j, k):
-        _mark_point(v, rows, cols, dirty)
         fresh[v] = True
 
 
 @numba.njit(**JIT)
-def _mark_point(v, rows, cols, dirty):
-    """Mark the patches of every cell round point v."""
-    r, c = v // cols, v % cols
-    for cell_r in (r - 1, r):
-        for cell_c in (c - 1, c):
-            if 0 <= cell_r < rows - 1 and 0 <= cell_c < cols - 1:
-                dirty[cell_r // PATCH, cell_c // PATCH] = True
+def _dirty_patches(fresh_blocks, dirty):
+    """Mark in ``dirty`` the patches holding a block of ``fresh_blocks`` (only those)."""
+    per = PATCH // SUB
+    dirty[:, :] = False
+    for si in range(fresh_blocks.shape[0]):
+        for sj in range(fresh_blocks.shape[1]):
+            if fresh_blocks[si, sj]:
+                dirty[si // per, sj // per] = True
