@@ -65,6 +65,7 @@ from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseStamped
 from hcloth_ros import lifetime, memory, params
 from hcloth_ros.core import kernels_cached, warm_up
+from hcloth_ros.core.blas import limit_openblas_threads
 from hcloth_ros.core.control import PINNED
 from hcloth_ros.core.solvers import HierarchicalSolver
 from hcloth_ros.diagnostics import node_status
@@ -271,11 +272,14 @@ class ClothSimNode(Node):
         threads = min(self.get_parameter('numba_threads').value,
                       numba.config.NUMBA_NUM_THREADS)
         numba.set_num_threads(threads)
+        # OpenBLAS's own spinning threads would take the cores numba's need (core.blas)
+        limit_openblas_threads(1)
         recording = bool(self.get_parameter('rerun_path').value
                          or self.get_parameter('rerun_url').value)
         wanted = {'solvers': [self.solver.name], 'parallel': threads > 1,
                   'energy': recording, 'self_contact': self.solver.self_contact is not None,
-                  'bodies': bool(self.obstacles.names())}
+                  'bodies': bool(self.obstacles.names()),
+                  'tangent_strain': self.solver.contact_strain == 'tangent'}
         if not kernels_cached(**wanted):
             self.get_logger().info(
                 f'preparing the numba kernels of the {self.solver.name} solver: the first '

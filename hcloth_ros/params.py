@@ -98,6 +98,13 @@ PARAMS = [
           'point free) and contact on each refinement level and on the finest level when '
           'it touches an obstacle; the coarser levels then take the finest state; 0: none',
           0, 1000, False),
+    Param('solver.contact_sweeps', 10, 'strain limiting sweeps of each contact round '
+          '(tangent: it stops once every spring is within the limit, so give it more, '
+          'e.g. 100)', 1, 10000),
+    Param('solver.contact_strain', 'jacobi', "contact rounds' strain limiting: jacobi (the "
+          "levels' own) or tangent (Gauss-Seidel, points lying on an obstacle move along "
+          'its surface: holds springs across a table edge; 1.4-2.2x the cost, see README)',
+          choices=('jacobi', 'tangent')),
     Param('self_contact.thickness', 0.0, 'self-contact: finest points stay this far from '
           "the cloth's own triangles and never cross one (m); 0 switches it off", 0.0, 0.1),
     Param('self_contact.friction', 0.3, 'self-contact: friction coefficient between layers',
@@ -314,7 +321,9 @@ def build_solver(model, values):
                        self_contact_iterations=int(values['self_contact.iterations']),
                        self_contact_interval=int(values['self_contact.interval']))
     return make_solver(name, model, external=values['solver.external'], strain_limit=limit,
-                       contact_rounds=int(values['solver.contact_rounds']), **options)
+                       contact_rounds=int(values['solver.contact_rounds']),
+                       contact_sweeps=int(values['solver.contact_sweeps']),
+                       contact_strain=values['solver.contact_strain'], **options)
 
 
 def build_all(values):

@@ -15,7 +15,7 @@ def jit_warm():
 
     So that the timings of the tests themselves are not dominated by compilation.
     """
-    return warm_up(self_contact=True, bodies=True)
+    return warm_up(self_contact=True, bodies=True, tangent_strain=True)
 
 
 @pytest.fixture

@@ -55,7 +55,7 @@ def test_the_solvers_buffers_are_resident_when_built():
     before = _rss_anon()
     solver = params.build_solver(model, values)
     grown = _rss_anon() - before
-    names = ('_q', '_qd', '_dv', '_presc', '_scratch', '_a', '_integrated', '_dv_app',
+    names = ('_q', '_qd', '_dv', '_presc', '_scratch', '_a', '_integrated',
              '_x_hat', '_v_hat')
     per_level = sum(a.nbytes for name in names for a in getattr(solver, name))
     assert per_level > 16 * MB

@@ -258,7 +258,7 @@ def test_eq7_level_and_prolong(rows, cols, literal, kit):
             lv['dinv'], lv['kind'], lv['presc'], H, GRAVITY, literal)
     expected = ref_eq7(*args, q_c, qd_c, dv_c, dv_app)
     outs = [full(lv['q'].shape) for _ in range(3)]
-    kit.eq7_level(*args, q_c, qd_c, dv_c, dv_app, *outs)
+    kit.eq7_level(*args, q_c, qd_c, dv_c, q_c, False, *outs)
     for name, got, want in zip(('q', 'qd', 'dv'), outs, expected):
         close(got, want, f'eq7 {name}')
     # inherited points are copies, bit for bit
@@ -567,20 +567,32 @@ def test_strain_stats(rows, cols, kit):
 
 @BUILDS
 @pytest.mark.parametrize('rows,cols', [(9, 11), (97, 91)])
-def test_add_prolonged_drift(rows, cols, kit):
-    """Free inserted points move by the prolonged coarse drift; the others stay, bit for bit."""
-    fine = make_level(rows, cols, seed=12)
+def test_eq7_level_adds_the_prolonged_drift(rows, cols, kit):
+    """
+    With ``drift``, free inserted points move by the prolonged coarse drift beyond h v+.
+
+    The other points and the velocities are eq. 7's without it, bit for bit.
+    """
+    fine = make_level(rows, cols, seed=12, noise=0.3, held=8)
     coarse = make_level((rows + 1) // 2, (cols + 1) // 2, seed=13)
     q_new, q_old, qd_new = coarse['q'], coarse['q'] + 0.01, coarse['qd']
+    dv_c = fine['rng'].standard_normal(q_new.shape)
     drift = (q_new - q_old) - H * qd_new
     inserted = np.ones((rows, cols), dtype=bool)
     inserted[::2, ::2] = False
     moves = inserted & (fine['kind'] == 0)
-    q = fine['q'].copy()
-    kit.add_prolonged_drift(q_new, q_old, qd_new, H, fine['kind'], q)
-    expected = fine['q'] + np.where(moves, ref_prolong(drift, rows, cols), 0.0)
-    assert np.array_equal(q, expected)
-    assert np.array_equal(q[:, ~moves], fine['q'][:, ~moves])
+    assert moves.any() and (inserted & (fine['kind'] != 0)).any()
+    args = (fine['q'], fine['qd'], fine['mass'], fine['rest'], fine['stiff'], 0.5,
+            fine['dinv'], fine['kind'], fine['presc'], H, GRAVITY, False, q_new, qd_new,
+            dv_c, q_old)
+    plain = [full(fine['q'].shape) for _ in range(3)]
+    kit.eq7_level(*args, False, *plain)
+    moved = [full(fine['q'].shape) for _ in range(3)]
+    kit.eq7_level(*args, True, *moved)
+    expected = plain[0] + np.where(moves, ref_prolong(drift, rows, cols), 0.0)
+    assert np.array_equal(moved[0], expected)
+    assert np.array_equal(moved[0][:, ~moves], plain[0][:, ~moves])
+    assert np.array_equal(moved[1], plain[1]) and np.array_equal(moved[2], plain[2])
 
 
 def test_points_by_id_f32():

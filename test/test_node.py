@@ -5,6 +5,7 @@ import re
 import time
 
 from geometry_msgs.msg import PoseStamped
+from hcloth_ros.core import blas
 from hcloth_ros.node import ClothSimNode
 from hcloth_ros.ros_msgs import points_from_pointcloud2
 import numpy as np
@@ -59,6 +60,8 @@ def test_publishes_finest_cloud_and_lod_marker(graph):
     assert pts[:, 2].mean() < 1.5 - 0.01
     # lod_level 1 (default) of a 9 x 9 level 0: 17 x 17 points, 2 * 16 * 16 triangles
     assert len(markers[-1].points) == 3 * 2 * 16 * 16
+    # numpy's OpenBLAS leaves the cores to numba's threads (hcloth_ros.core.blas)
+    assert set(blas.openblas_threads().values()) <= {1}
 
 
 def _stamp(msg):

@@ -78,6 +78,19 @@ def test_self_contact_parameters_reach_the_solver():
         (0.004, 0.2, 3, 2)
 
 
+def test_contact_strain_parameters_reach_the_solver():
+    values = params.resolve({'cloth.resolution': [5, 5], 'cloth.levels': 2})
+    solver = params.build_solver(params.build_model(values), values)
+    assert (solver.contact_strain, solver.contact_sweeps) == ('jacobi', 10)
+    values = params.resolve({'cloth.resolution': [5, 5], 'cloth.levels': 2,
+                             'solver.contact_strain': 'tangent', 'solver.contact_sweeps': 100})
+    solver = params.build_solver(params.build_model(values), values)
+    assert (solver.contact_strain, solver.contact_sweeps) == ('tangent', 100)
+    for name, value in (('solver.contact_strain', 'gauss'), ('solver.contact_sweeps', 0)):
+        with pytest.raises(ValueError, match=name.replace('.', r'\.')):
+            params.resolve({name: value})
+
+
 def test_command_line_assignments_are_yaml_values():
     assert params.assignments(['solver.dt=0.01', 'cloth.levels=5', 'a=null', 'b=[1, 2]',
                                'c=x=y']) == {'solver.dt': 0.01, 'cloth.levels': 5,

@@ -18,13 +18,13 @@ def test_shares_compile_exactly_the_signatures_the_warm_up_uses():
     Every recorded signature must be one the real calls compiled.
     """
     calls = kernel_calls(parallel=numba.get_num_threads() > 1, energy=True, self_contact=True,
-                         bodies=True)
+                         bodies=True, tangent_strain=True)
     names = {d.py_func.__name__ for d, _ in calls}
     assert {'eq7_level', 'strain_limit', 'contact', 'conjugate_gradient', 'energy',
-            'self_contact', 'body_contact'} <= names
+            'self_contact', 'body_contact', 'tangent_strain_limit'} <= names
     without = {d.py_func.__name__ for d, _ in kernel_calls(
         parallel=numba.get_num_threads() > 1, energy=True)}
-    assert not {'self_contact', 'body_contact'} & without
+    assert not {'self_contact', 'body_contact', 'tangent_strain_limit'} & without
     for dispatcher, signature in calls:
         assert signature in dispatcher.overloads, (dispatcher.py_func.__name__, signature)
 
@@ -46,8 +46,7 @@ def test_cache_directory_is_keyed_on_every_kernel_source(tmp_path):
 
 
 def test_parallel_builds_are_other_functions_with_their_own_cache_entries():
-    for name in ('eq7_level', 'strain_limit', 'strain_stats', 'system_apply',
-                 'add_prolonged_drift'):
+    for name in ('eq7_level', 'strain_limit', 'strain_stats', 'system_apply'):
         serial, parallel = getattr(kernels.SERIAL, name), getattr(kernels.PARALLEL, name)
         assert serial is not parallel
         assert parallel.targetoptions.get('parallel') and not serial.targetoptions.get(

@@ -29,8 +29,10 @@ def main(argv=None):
     args = parser.parse_args(argv)
     from hcloth_ros import params
     from hcloth_ros.core import warm_up
+    from hcloth_ros.core.blas import limit_openblas_threads
     from hcloth_ros.core.recovery import step_with_retries
     numba.set_num_threads(args.threads)
+    limit_openblas_threads(1)      # as the node does
     values = params.resolve(params.assignments(args.param))
     warm_up(solvers=[values['solver.name']], parallel=args.threads > 1, energy=False)
     model, solver, state, control = params.build_all(values)

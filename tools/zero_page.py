@@ -40,15 +40,14 @@ def main(argv=None):
     model, solver, state, control = params.build_all(values)
     k, h = model.level_count - 1, float(values['solver.dt'])
     lv, kit, holds = model.level(k), solver.kernels(k), control.holds(k)
-    rng = np.random.default_rng(0)
-    estimate = rng.normal(scale=0.01, size=state.q[k].shape)
     coarse = [a.copy() for a in (state.q[k - 1], state.qd[k - 1], state.qd[k - 1])]
     outputs = [buffers.zeros(state.q[k].shape) for _ in range(3)]
 
     def eq7(prescribed):
         kit.eq7_level(state.q[k], state.qd[k], lv.mass, lv.rest, lv.stiffness,
                       lv.contraction, solver.dinv(k, h), holds.kind, prescribed, h,
-                      model.gravity, False, *coarse, estimate, *outputs)
+                      model.gravity, False, *coarse, state.q[k - 1], False,
+                      *outputs)
 
     unwritten = np.zeros(state.q[k].shape)
     written = buffers.zeros(state.q[k].shape)

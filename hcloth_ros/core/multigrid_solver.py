@@ -53,8 +53,8 @@ def _grids_below(model, smallest=3):
 
 
 def _norm(a):
-    """Euclidean norm of an array's entries."""
-    return float(np.sqrt(np.vdot(a, a)))
+    """Euclidean norm of an array's entries (not np.vdot: BLAS threads, see core.blas)."""
+    return float(np.sqrt(np.sum(np.square(a))))
 
 
 # m/s^2: the unit of weight the Newton tolerance is given in (whatever the model's gravity)
@@ -153,6 +153,7 @@ class MultigridSolver(HierarchicalSolver):
     """
 
     name = 'multigrid'
+    refine_drift = True
 
     def __init__(self, model, integrator='bdf2', accurate_level=1, newton_iterations=3,
                  cg_iterations=2, cg_rtol=1e-3, smoothing_sweeps=1, coarse_sweeps=4,
@@ -295,11 +296,9 @@ class MultigridSolver(HierarchicalSolver):
         moved 104 finest points back into the table; before contact, the finest springs
         ran away).
         """
+        # with what the coarser level moved beyond h v+ prolonged onto the free inserted
+        # points (refine_drift; held points are where their holds put them)
         self._eq7(k, state, holds, h)
-        # what the coarser level moved beyond h v+, prolonged onto the free inserted points
-        # (held points are where their holds put them)
-        self.kernels(k).add_prolonged_drift(self._q[k - 1], state.q[k - 1], self._qd[k - 1],
-                                            h, holds.kind, self._q[k])
         self._post(k, state, holds, h, True)
         if not holds.kind.any() and not self._touched:
             self._match_momentum(k, state, h)

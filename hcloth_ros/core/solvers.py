@@ -30,7 +30,6 @@ import time
 
 from hcloth_ros.core import buffers, kernels
 from hcloth_ros.core.control import FREE
-from hcloth_ros.core.kernels import contact_strain as on_surface
 from hcloth_ros.core.scene import MARGIN
 from hcloth_ros.core.self_contact import SelfContact
 import numba
@@ -309,7 +308,7 @@ class Solver:
             return self.kernels(k).strain_limit(
                 self._q[k], self._qd[k], self._dv[k], lv.rest, holds.kind, False, limit,
                 self.contact_sweeps, self.strain_tolerance, h, self._scratch[k])
-        return on_surface.tangent_strain_limit(
+        return self.kernels(k).tangent_strain_limit(
             self._q[k], self._qd[k], self._dv[k], lv.rest, holds.kind, scene.planes,
             scene.boxes, scene.spheres, scene.margin, limit, self.contact_sweeps,
             self.strain_tolerance, h)
@@ -476,7 +475,6 @@ class HierarchicalSolver(Solver):
     def __init__(self, model, finest_level=None, **options):
         super().__init__(model, **options)
         self.finest_level = model.level_count - 1 if finest_level is None else finest_level
-        self._dv_app = [buffers.zeros_like(x) for x in self._q]
 
     @property
     def finest_level(self):
@@ -513,14 +511,18 @@ class HierarchicalSolver(Solver):
         self._eq7(k, state, holds, h)
         self._post(k, state, holds, h, True)
 
+    # whether eq. 7's inserted points also take level k-1's drift beyond h v+ (see
+    # kernels.eq7.eq7_level): only where level k-1 moves otherwise than by h v+
+    refine_drift = False
+
     def _eq7(self, k, state, holds, h):
-        """Prolong level k-1's velocity change, then constraint C and eq. 7 on level k."""
+        """Constraint C and eq. 7 on level k, from level k-1's velocity change prolonged."""
         lv, kit = self.model.level(k), self.kernels(k)
-        kit.prolong(self._dv[k - 1], self._dv_app[k])
         kit.eq7_level(state.q[k], state.qd[k], lv.mass, lv.rest, lv.stiffness, lv.contraction,
                       self.dinv(k, h), holds.kind, self._presc[k], h, self.model.gravity,
                       self.literal, self._q[k - 1], self._qd[k - 1], self._dv[k - 1],
-                      self._dv_app[k], self._q[k], self._qd[k], self._dv[k])
+                      state.q[k - 1], self.refine_drift, self._q[k], self._qd[k],
+                      self._dv[k])
 
 
 class ImplicitSolver(_SingleLevel):

@@ -37,8 +37,7 @@ COMPILE_SECONDS = {'strain_limit': 9.4, 'strain_limit_parallel': 7.7, 'eq7_level
                    'energy': 1.0, 'multigrid_cg': 13.3, 'assemble_hierarchy': 8.1,
                    'newton_residual': 1.8, 'anchor': 1.8, 'new_positions': 0.4,
                    'start_velocity': 0.3, 'prescribe': 0.3, 'prolong': 0.5, 'inject': 0.1,
-                   'points_by_id_f32': 0.3, 'self_contact': 18.8, 'body_contact': 6.3,
-                   'add_prolonged_drift_parallel': 1.0}
+                   'points_by_id_f32': 0.3, 'self_contact': 18.8, 'body_contact': 6.3}
 
 
 # Options a solver runs with to reach all its kernels: the multigrid solver refines by
@@ -52,12 +51,13 @@ def _tiny_model():
     return ClothBuilder(resolution=(3, 3), level_count=2, scene=scene).finalize()
 
 
-def _exercise(model, solvers, parallel, energy, self_contact=False, bodies=False, builds=None):
+def _exercise(model, solvers, parallel, energy, self_contact=False, bodies=False,
+              tangent_strain=False, builds=None):
     """
     Make every kernel call the configuration makes.
 
-    One step of each solver (and build), with self-contact and a moving body if asked, the
-    energy, a level restart. ``builds`` maps
+    One step of each solver (and build), with self-contact, a moving body and the contact
+    rounds' tangent strain limiting if asked, the energy, a level restart. ``builds`` maps
     ``'serial'`` and ``'parallel'`` to the kernel sets (default :mod:`kernels`' own).
     """
     builds = builds or {'serial': kernels.SERIAL, 'parallel': kernels.PARALLEL}
@@ -66,6 +66,8 @@ def _exercise(model, solvers, parallel, energy, self_contact=False, bodies=False
             for options in EXERCISE_OPTIONS.get(name, ({},)):
                 if self_contact:
                     options = dict(options, thickness=0.01)
+                if tangent_strain:
+                    options = dict(options, contact_strain='tangent')
                 state = State.at_rest(model)
                 control = Control(model)
                 control.pin([0])
@@ -77,6 +79,14 @@ def _exercise(model, solvers, parallel, energy, self_contact=False, bodies=False
                     control.bodies.set_pose('warm', np.eye(3), (0.5, 0.5, 1.1))
                 make_solver(name, model, builds=builds[build], **options).step(
                     state, control, 1e-3)
+    if tangent_strain:
+        # as Solver._round_strain_limit calls it: a step of the tiny cloth need not reach
+        # the contact rounds with a spring over its limit
+        state, scene = State.at_rest(model), model.scene
+        builds['serial'].tangent_strain_limit(
+            state.q[1], state.qd[1], np.zeros_like(state.q[1]), model.level(1).rest,
+            Control(model).holds(1).kind, scene.planes, scene.boxes, scene.spheres,
+            float(scene.margin), 0.1, 10, 0.005, 1e-3)
     state = State.at_rest(model)
     lv, kit = model.level(0), builds['serial']
     if energy:
@@ -112,13 +122,15 @@ class _Recorder:
         return record
 
 
-def kernel_calls(solvers=None, parallel=None, energy=True, self_contact=False, bodies=False):
+def kernel_calls(solvers=None, parallel=None, energy=True, self_contact=False, bodies=False,
+                 tangent_strain=False):
     """``[(dispatcher, signature)]`` a warm-up of this configuration compiles, each once."""
     parallel = numba.get_num_threads() > 1 if parallel is None else parallel
     calls = []
     sets = {'serial': _Recorder(kernels.SERIAL, calls),
             'parallel': _Recorder(kernels.PARALLEL, calls)}
-    _exercise(_tiny_model(), solvers, parallel, energy, self_contact, bodies, builds=sets)
+    _exercise(_tiny_model(), solvers, parallel, energy, self_contact, bodies, tangent_strain,
+              builds=sets)
     unique = {}
     for dispatcher, args in calls:
         signature = tuple(numba.typeof(a) for a in args)
@@ -126,13 +138,15 @@ def kernel_calls(solvers=None, parallel=None, energy=True, self_contact=False, b
     return list(unique.values())
 
 
-def compile_share(solvers, parallel, energy, self_contact, bodies, index, count):
+def compile_share(solvers, parallel, energy, self_contact, bodies, tangent_strain, index,
+                  count):
     """
     Compile share ``index`` of ``count`` of the configuration's kernels into the cache.
 
     Shares are balanced by :data:`COMPILE_SECONDS`, largest first.
     """
-    calls = sorted(kernel_calls(solvers, parallel, energy, self_contact, bodies),
+    calls = sorted(kernel_calls(solvers, parallel, energy, self_contact, bodies,
+                                tangent_strain),
                    key=lambda c: -COMPILE_SECONDS.get(c[0].py_func.__name__, 1.0))
     load = [0.0] * count
     for dispatcher, signature in calls:
@@ -142,7 +156,7 @@ def compile_share(solvers, parallel, energy, self_contact, bodies, index, count)
             dispatcher.compile(signature)
 
 
-def _stamp(solvers, parallel, energy, self_contact, bodies):
+def _stamp(solvers, parallel, energy, self_contact, bodies, tangent_strain):
     """Return the file that says a configuration's kernels are in the cache (or None)."""
     if kernels.jit.CACHE_DIR is None:
         return None
@@ -151,22 +165,25 @@ def _stamp(solvers, parallel, energy, self_contact, bodies):
     key = '-'.join(names + ['parallel' if parallel else 'serial']
                    + (['energy'] if energy else []) + (['contact'] if self_contact else [])
                    + (['bodies'] if bodies else [])
+                   + (['tangent'] if tangent_strain else [])
                    + [numba.__version__, llvmlite.binding.get_host_cpu_name()])
     return os.path.join(kernels.jit.CACHE_DIR, f'warm-{key}')
 
 
-def kernels_cached(solvers=None, parallel=None, energy=True, self_contact=False, bodies=False):
+def kernels_cached(solvers=None, parallel=None, energy=True, self_contact=False, bodies=False,
+                   tangent_strain=False):
     """
     Tell whether :func:`warm_up` with these arguments ran on this machine before.
 
     If so it will load, not compile: under a second instead of tens of seconds.
     """
     parallel = numba.get_num_threads() > 1 if parallel is None else parallel
-    stamp = _stamp(solvers, parallel, energy, self_contact, bodies)
+    stamp = _stamp(solvers, parallel, energy, self_contact, bodies, tangent_strain)
     return stamp is not None and os.path.exists(stamp)
 
 
-def _compile_in_processes(solvers, parallel, energy, self_contact, bodies, processes):
+def _compile_in_processes(solvers, parallel, energy, self_contact, bodies, tangent_strain,
+                          processes):
     """Shares 1 .. processes-1 in child processes, share 0 here, all into the cache."""
     code = ('import sys; from hcloth_ros.core.warmup import compile_share; '
             'compile_share(*eval(sys.argv[1]))')
@@ -174,18 +191,19 @@ def _compile_in_processes(solvers, parallel, energy, self_contact, bodies, proce
     env = dict(os.environ, PYTHONPATH=os.pathsep.join(
         [package_root] + [p for p in os.environ.get('PYTHONPATH', '').split(os.pathsep) if p]))
     children = [subprocess.Popen([sys.executable, '-c', code,
-                                  repr((solvers, parallel, energy, self_contact, bodies, i,
-                                        processes))], env=env)
+                                  repr((solvers, parallel, energy, self_contact, bodies,
+                                        tangent_strain, i, processes))], env=env)
                 for i in range(1, processes)]
     try:
-        compile_share(solvers, parallel, energy, self_contact, bodies, 0, processes)
+        compile_share(solvers, parallel, energy, self_contact, bodies, tangent_strain, 0,
+                      processes)
     finally:
         for child in children:
             child.wait()
 
 
 def warm_up(solvers=None, parallel=None, energy=True, self_contact=False, bodies=False,
-            processes=None):
+            tangent_strain=False, processes=None):
     """
     Compile (or load from the cache) the kernels a configuration uses; returns seconds.
 
@@ -194,7 +212,8 @@ def warm_up(solvers=None, parallel=None, energy=True, self_contact=False, bodies
     (default: when numba runs more than one thread); ``energy``: the energy kernel
     (recordings and metrics); ``self_contact``: the self-contact kernel (off by default:
     18.8 s to compile, ``COMPILE_SECONDS``, for a feature that is opt-in); ``bodies``: the
-    moving bodies' kernel (off by default, 6.3 s); ``processes``:
+    moving bodies' kernel (off by default, 6.3 s); ``tangent_strain``: the contact rounds'
+    strain limiting along obstacles (``contact_strain='tangent'``); ``processes``:
     how many processes compile on an empty cache (default: the cores, at most 4; 1
     compiles here only). With the on-disk cache this loads machine code in well under a
     second.
@@ -203,10 +222,12 @@ def warm_up(solvers=None, parallel=None, energy=True, self_contact=False, bodies
     parallel = numba.get_num_threads() > 1 if parallel is None else parallel
     processes = min(os.cpu_count() or 1, 4) if processes is None else int(processes)
     if processes > 1 and kernels.jit.CACHE_DIR is not None \
-            and not kernels_cached(solvers, parallel, energy, self_contact, bodies):
-        _compile_in_processes(solvers, parallel, energy, self_contact, bodies, processes)
-    _exercise(_tiny_model(), solvers, parallel, energy, self_contact, bodies)
-    stamp = _stamp(solvers, parallel, energy, self_contact, bodies)
+            and not kernels_cached(solvers, parallel, energy, self_contact, bodies,
+                                   tangent_strain):
+        _compile_in_processes(solvers, parallel, energy, self_contact, bodies, tangent_strain,
+                              processes)
+    _exercise(_tiny_model(), solvers, parallel, energy, self_contact, bodies, tangent_strain)
+    stamp = _stamp(solvers, parallel, energy, self_contact, bodies, tangent_strain)
     if stamp is not None:
         with open(stamp, 'w'):
             pass

@@ -41,12 +41,15 @@ V-cycle-preconditioned CG solve
     ``test_multigrid::test_stored_blocks_give_backward_eulers_matrix``,
     ``test_multigrid::test_v_cycle_preconditioner_on_a_33_grid``
 refinement above the BDF2 level: eq. 7, then the coarse level's drift beyond ``h v+``
-    ``eq7.eq7_level``, ``eq7.add_prolonged_drift``; ``ref_prolong``;
-    ``test_kernel_equivalence::test_add_prolonged_drift``
+    ``eq7.eq7_level`` (``drift``); ``ref_prolong``;
+    ``test_kernel_equivalence::test_eq7_level_adds_the_prolonged_drift``
 strain limiting (Provot 1995)
     ``strain.strain_limit``; ``ref_strain_limit``; ``test_kernel_equivalence::test_strain_*``
 contact with static obstacles
     ``contact.contact``; closed-form geometry; ``test_physics::test_cloth_dropped_on_*``
+strain limiting in the contact rounds along the obstacles' surfaces (``contact_strain``)
+    ``contact_strain.tangent_strain_limit``; ``test_contact_recovery::
+    test_the_tangent_strain_limiting_keeps_a_spring_across_an_edge_on_its_faces``
 contact with moving bodies (boxes, spheres, capsules; friction against their surface velocity)
     ``bodies.body_contact``; closed-form geometry and Coulomb's law; ``test_bodies``
 self-contact (thickness, crossings during a step, friction between layers)
@@ -80,10 +83,9 @@ with keyed_cache():
                                               start_velocity)
     from hcloth_ros.core.kernels.bodies import body_contact
     from hcloth_ros.core.kernels.contact import contact
+    from hcloth_ros.core.kernels.contact_strain import tangent_strain_limit
     from hcloth_ros.core.kernels.eq6 import eq6_first_sweep, eq6_second_sweep
-    from hcloth_ros.core.kernels.eq7 import (add_prolonged_drift,
-                                             add_prolonged_drift_parallel, eq7_level,
-                                             eq7_level_parallel, prolong)
+    from hcloth_ros.core.kernels.eq7 import eq7_level, eq7_level_parallel, prolong
     from hcloth_ros.core.kernels.explicit import explicit_step
     from hcloth_ros.core.kernels.export import points_by_id_f32
     from hcloth_ros.core.kernels.holds import prescribe
@@ -100,13 +102,13 @@ with keyed_cache():
     from hcloth_ros.core.kernels.strain import (excess_threshold, strain_limit,
                                                 strain_limit_parallel)
 
-KERNELS = ('add_prolonged_drift', 'anchor', 'assemble_hierarchy', 'body_contact', 'contact',
+KERNELS = ('anchor', 'assemble_hierarchy', 'body_contact', 'contact',
            'conjugate_gradient',
            'energy', 'eq6_first_sweep', 'eq6_second_sweep', 'eq7_level', 'excess_threshold',
            'explicit_step', 'inject', 'multigrid_cg', 'new_positions', 'newton_residual',
            'points_by_id_f32', 'prescribe', 'prolong', 'self_contact', 'spring_forces',
            'start_velocity', 'strain_limit', 'strain_stats', 'system_apply',
-           'system_diagonal')
+           'system_diagonal', 'tangent_strain_limit')
 # Every kernel by name: SERIAL holds the serial builds, PARALLEL the parallel builds of
 # those that have one (jit.serial_and_parallel) and the serial build of the others.
 SERIAL = SimpleNamespace(**{name: globals()[name] for name in KERNELS})
@@ -124,8 +126,7 @@ def builds(rows, cols, threads):
     return PARALLEL if threads > 1 and rows * cols >= PAR_MIN_POINTS else SERIAL
 
 
-__all__ = ['add_prolonged_drift', 'add_prolonged_drift_parallel', 'anchor',
-           'assemble_hierarchy', 'body_contact', 'builds', 'chunk_count',
+__all__ = ['anchor', 'assemble_hierarchy', 'body_contact', 'builds', 'chunk_count',
            'conjugate_gradient', 'conjugate_gradient_parallel', 'contact', 'DRIVEN', 'energy',
            'eq6_first_sweep', 'eq6_second_sweep', 'eq7_level', 'eq7_level_parallel',
            'excess_threshold', 'explicit_step', 'FREE', 'inject', 'KERNELS', 'multigrid_cg',
@@ -133,4 +134,4 @@ __all__ = ['add_prolonged_drift', 'add_prolonged_drift_parallel', 'anchor',
            'points_by_id_f32', 'prescribe', 'prolong', 'SERIAL', 'self_contact', 'spring_forces',
            'start_velocity', 'STENCIL_DC', 'STENCIL_DR', 'STENCIL_SIZE', 'strain_limit',
            'strain_limit_parallel', 'strain_stats', 'strain_stats_parallel', 'system_apply',
-           'system_apply_parallel', 'system_diagonal']
+           'system_apply_parallel', 'system_diagonal', 'tangent_strain_limit']

@@ -71,7 +71,8 @@ def eq6_second_sweep(
     h2 = h * h
     exact = 0.0 if literal else h
     for r in range(rows):
-        stencil_sum_row(dv_first, r, stiffness, (0.0, 0.0, 0.0), sx, sy, sz)
+        stencil_sum_row(dv_first, r, dv_first.shape[1], stiffness, (0.0, 0.0, 0.0), sx, sy,
+                        sz)
         kinds, w = hold_kind[r], inv_diagonal[r]
         for d in range(q.shape[0]):
             neighbours = sx if d == 0 else (sy if d == 1 else sz)

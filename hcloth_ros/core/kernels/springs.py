@@ -148,22 +148,24 @@ def paired_force_row(terms, r, rows, fx, fy, fz):
 
 
 @numba.njit(**JIT)
-def stencil_sum_row(a, r, stiffness, shift, sx, sy, sz):
+def stencil_sum_row(a, r, rows, stiffness, shift, sx, sy, sz):
     """
     Sum ``k_s (a[:, neighbour_s] - shift)`` over s for every point of row r into ``s*``.
 
     The off-diagonal product of the paper's Jacobian approximation with a field (eq. 6's
     second sweep, eq. 7's neighbour term); ``shift`` (3 floats) is subtracted from every
-    neighbour value.
+    neighbour value. The level has ``rows`` rows; its row t is ``a[:, t % a.shape[1]]``:
+    ``a`` is the whole level, or a ring of the rows around r.
     """
-    rows, cols = a.shape[1], a.shape[2]
+    cols = a.shape[2]
+    period = a.shape[1]
     gx, gy, gz = shift
     clear3(sx, sy, sz)
     for s in range(stiffness.shape[0]):
         lo, hi = stencil_span(r, s, rows, cols)
         if hi <= lo:
             continue
-        xn, yn, zn = row3(a, r + STENCIL_DR[s], lo + STENCIL_DC[s])
+        xn, yn, zn = row3(a, (r + STENCIL_DR[s]) % period, lo + STENCIL_DC[s])
         ox, oy, oz = sx[lo:], sy[lo:], sz[lo:]
         k = stiffness[s]
         for i in range(hi - lo):
