@@ -14,12 +14,16 @@ or not: see the load), for each solver given.
     .venv/bin/python tools/table_flaps.py multigrid --levels 5 --contact-rounds 16
     .venv/bin/python tools/table_flaps.py multigrid --levels 5 --option contact_sweeps=40
     .venv/bin/python tools/table_flaps.py multigrid --levels 5 --option accurate_level=3 --edge
+    .venv/bin/python tools/table_flaps.py multigrid --levels 5 --rising 0.05 \
+        --option contact_strain=tangent --option contact_sweeps=300
 
 ``--edge`` also prints, for each level from 33 x 33 up, the strain at the end of the
 structural springs that bridge the table's edge (one end on the top, the other on a side
 face, each within 1.5 mm of the grown box's surface) and of those lying on the top and on
 the sides; ``--friction`` sets the table's and the ground's friction coefficient,
-``--contraction`` the springs' resistance to compression.
+``--contraction`` the springs' resistance to compression; ``--rising`` makes the table a
+moving body (a box the solver's moving-body contact handles) rising at that speed (m/s;
+0: still) instead of part of the static scene (``--edge`` then measures where it started).
 """
 
 import argparse
@@ -37,28 +41,40 @@ OPTIONS = {'implicit': {'tolerance': 1e-4, 'strain_limit': None}}
 
 
 def flaps(solver_name, levels, k_bend, contact_rounds=16, seconds=4.0, dt=1 / 60,
-          extra=None, friction=0.5, contraction=None):
+          extra=None, friction=0.5, contraction=None, rising=None):
     """
     Drop the cloth and measure it.
 
     ``extra``: more solver options; ``contraction``: the springs' resistance to
-    compression, one value per level (default 1).
+    compression, one value per level (default 1); ``rising``: the table as a moving body
+    rising at this speed (m/s), None: part of the static scene.
 
     Returns the flaps' lowest and highest z (m) or None, the largest strain over the run,
     its range over the last 3 s, in the last step, where the most stretched finest spring
     is at the end (x, y, z of its first point), the mean seconds a step took, and the
     model and state at the end.
     """
-    scene = make_scene(ground_z=0.0, boxes=[TABLE], friction=friction, margin=MARGIN)
+    boxes = [TABLE] if rising is None else []
+    scene = make_scene(ground_z=0.0, boxes=boxes, friction=friction, margin=MARGIN)
     model = ClothBuilder(resolution=(9, 9), level_count=levels, scene=scene, air_drag=1.0,
                          k_bend=k_bend, contraction=contraction,
                          placement=Placement(origin=(-0.5, -0.5, 1.0))).finalize()
     state, control = State.at_rest(model), Control(model)
+
+    def place(step):
+        if rising is not None:
+            control.bodies.set_pose('table', np.eye(3),
+                                    TABLE[:2] + (TABLE[2] + rising * step * dt,))
+    if rising is not None:
+        control.bodies.add('table', 'box', TABLE[3:], friction=friction)
+        place(0)
+        control.bodies.commit()
     solver = make_solver(solver_name, model, contact_rounds=contact_rounds,
                          **OPTIONS.get(solver_name, {}), **(extra or {}))
     worst, steps, start = 0.0, int(round(seconds / dt)), time.perf_counter()
     late = []
     for i in range(steps):
+        place(i + 1)
         report = solver.step(state, control, dt)
         if not report.ok:
             raise RuntimeError(f'{solver_name}: {report.reason}')
@@ -157,6 +173,8 @@ def main(argv=None):
     parser.add_argument('--contraction', type=float, nargs='+',
                         help="the springs' resistance to compression in [0, 1], one value "
                              'per level, coarsest first (default 1 on every level)')
+    parser.add_argument('--rising', type=float,
+                        help='the table as a moving body rising at this speed (m/s)')
     parser.add_argument('--edge', action='store_true',
                         help="print the strains of the springs across the table's edge")
     args = parser.parse_args(argv)
@@ -165,7 +183,7 @@ def main(argv=None):
         for name in args.solvers:
             heights, worst, late, last, spot, seconds, model, state = flaps(
                 name, args.levels, args.k_bend, rounds, extra=extra, friction=args.friction,
-                contraction=args.contraction)
+                contraction=args.contraction, rising=args.rising)
             where = ('no point beyond 0.45 m: the flaps hang inside it' if heights is None
                      else f'flaps at z = {heights[0]:.3f} .. {heights[1]:.3f} m')
             print(f'{name:12s} contact_rounds {rounds:3d}: {where}; largest strain '

@@ -30,7 +30,7 @@ import time
 
 from hcloth_ros.core import buffers, kernels
 from hcloth_ros.core.control import FREE
-from hcloth_ros.core.scene import MARGIN
+from hcloth_ros.core.scene import empty_scene, MARGIN
 from hcloth_ros.core.self_contact import SelfContact
 import numba
 import numpy as np
@@ -40,6 +40,7 @@ EXTERNAL_MODES = ('exact', 'literal')
 CONTACT_STRAIN = ('jacobi', 'tangent')
 NO_PLANES = np.zeros((0, 4))
 NO_PLANES.setflags(write=False)     # as a scene's planes: one compiled signature
+NO_SCENE = empty_scene()            # its arrays read-only too, as a scene's
 
 
 @dataclass
@@ -304,14 +305,15 @@ class Solver:
     def _round_strain_limit(self, k, holds, h, limit, scene):
         """Strain limiting of one contact round on level k; returns the sweeps that corrected."""
         lv = self.model.level(k)
-        if self.contact_strain == 'jacobi' or scene is None:
+        if self.contact_strain == 'jacobi':
             return self.kernels(k).strain_limit(
                 self._q[k], self._qd[k], self._dv[k], lv.rest, holds.kind, False, limit,
                 self.contact_sweeps, self.strain_tolerance, h, self._scratch[k])
+        scene = scene or NO_SCENE
         return self.kernels(k).tangent_strain_limit(
             self._q[k], self._qd[k], self._dv[k], lv.rest, holds.kind, scene.planes,
-            scene.boxes, scene.spheres, scene.margin, limit, self.contact_sweeps,
-            self.strain_tolerance, h)
+            scene.boxes, scene.spheres, self._bodies, scene.margin, limit,
+            self.contact_sweeps, self.strain_tolerance, h)
 
     def _pbd_velocity(self, k, state, integrated, h):
         """

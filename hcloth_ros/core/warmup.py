@@ -82,11 +82,11 @@ def _exercise(model, solvers, parallel, energy, self_contact=False, bodies=False
     if tangent_strain:
         # as Solver._round_strain_limit calls it: a step of the tiny cloth need not reach
         # the contact rounds with a spring over its limit
-        state, scene = State.at_rest(model), model.scene
+        state, scene, control = State.at_rest(model), model.scene, Control(model)
         builds['serial'].tangent_strain_limit(
             state.q[1], state.qd[1], np.zeros_like(state.q[1]), model.level(1).rest,
-            Control(model).holds(1).kind, scene.planes, scene.boxes, scene.spheres,
-            float(scene.margin), 0.1, 10, 0.005, 1e-3)
+            control.holds(1).kind, scene.planes, scene.boxes, scene.spheres,
+            control.bodies.packed(), float(scene.margin), 0.1, 10, 0.005, 1e-3)
     state = State.at_rest(model)
     lv, kit = model.level(0), builds['serial']
     if energy:

@@ -20,6 +20,8 @@ take each move divided by ``h``, as :mod:`~hcloth_ros.core.kernels.strain` does.
 
 import math
 
+from hcloth_ros.core.kernels.bodies import _off_core, _rotate, _to_local, BOX, KIND, R_END, \
+    SIZE, T_END
 from hcloth_ros.core.kernels.jit import JIT
 from hcloth_ros.core.kernels.layout import FREE, STENCIL_DC, STENCIL_DR
 import numba
@@ -39,55 +41,94 @@ STEP_COLS = np.asarray(STENCIL_DC)[DIRECTIONS].astype(np.int64)
 
 
 @numba.njit(**JIT)
-def _normal(x, y, z, planes, boxes, spheres, margin):
+def _box_face(x, y, z, hx, hy, hz, margin):
     """
-    Return the outward unit normal of the surface a point at (x, y, z) lies on (0: none).
+    Outward normal of the face of a box at the origin (half extents h) a point lies on.
 
-    The planes are tried first, then the boxes' faces (a point on a box's top, within its
-    x and y extent, takes +z; on a side face, below the top, that face's normal), then the
-    spheres; the last one found counts.
+    ``(found, nx, ny, nz)``: a point on the top, within its x and y extent, takes +z; on a
+    side face, below the top, that face's normal; away from the box or inside it, none
+    (inside is contact's business).
     """
-    nx, ny, nz = 0.0, 0.0, 0.0
-    for p in range(planes.shape[0]):
-        gap = x * planes[p, 0] + y * planes[p, 1] + z * planes[p, 2] - planes[p, 3] - margin
-        if -BAND < gap < BAND:
-            nx, ny, nz = planes[p, 0], planes[p, 1], planes[p, 2]
-    for b in range(boxes.shape[0]):
-        out_x = abs(x - boxes[b, 0]) - boxes[b, 3] - margin
-        out_y = abs(y - boxes[b, 1]) - boxes[b, 4] - margin
-        out_z = abs(z - boxes[b, 2]) - boxes[b, 5] - margin
-        farthest = max(out_x, out_y, out_z)
-        if not -BAND < farthest < BAND:
-            continue    # away from it, or inside (contact's business)
-        if out_z > -BAND:
-            nx, ny, nz = 0.0, 0.0, 1.0 if z > boxes[b, 2] else -1.0
-        elif out_x > -BAND:
-            nx, ny, nz = 1.0 if x > boxes[b, 0] else -1.0, 0.0, 0.0
-        else:
-            nx, ny, nz = 0.0, 1.0 if y > boxes[b, 1] else -1.0, 0.0
-    for s in range(spheres.shape[0]):
-        dx, dy, dz = x - spheres[s, 0], y - spheres[s, 1], z - spheres[s, 2]
-        dist = math.sqrt(dx * dx + dy * dy + dz * dz)
-        if dist > 0.0 and abs(dist - spheres[s, 3] - margin) < BAND:
-            nx, ny, nz = dx / dist, dy / dist, dz / dist
-    return nx, ny, nz
+    out_x = abs(x) - hx - margin
+    out_y = abs(y) - hy - margin
+    out_z = abs(z) - hz - margin
+    if not -BAND < max(out_x, out_y, out_z) < BAND:
+        return False, 0.0, 0.0, 0.0
+    if out_z > -BAND:
+        return True, 0.0, 0.0, 1.0 if z > 0.0 else -1.0
+    if out_x > -BAND:
+        return True, 1.0 if x > 0.0 else -1.0, 0.0, 0.0
+    return True, 0.0, 1.0 if y > 0.0 else -1.0, 0.0
 
 
 @numba.njit(**JIT)
-def _kept(q, r, c, mx, my, mz, planes, boxes, spheres, margin):
+def _body_normal(b, x, y, z, margin):
     """
-    Return the move (mx, my, mz) of point (r, c) without its part into its surface.
+    Outward normal (world) of moving body row b's surface where a point lies, at the step's end.
 
-    The surface is found where the point is now, not once a round: with the normals taken
-    at the start of each round the 129 x 129 table drop reached 0.252 (0.171 this way) and
-    0.105-0.211 over its last 3 s (``tools/table_flaps.py multigrid --levels 5 --option
-    contact_strain=tangent --option contact_sweeps=100``, one run each), presumably as a
-    point pulled off a face during the sweeps kept that face's normal.
+    ``(found, nx, ny, nz)``; a box as :func:`_box_face` in the body's frame, a sphere or
+    capsule from the nearest point of its core.
     """
-    nx, ny, nz = _normal(q[0, r, c], q[1, r, c], q[2, r, c], planes, boxes, spheres, margin)
+    lx, ly, lz = _to_local(b, R_END, T_END, x, y, z)
+    if int(b[KIND]) == BOX:
+        found, nx, ny, nz = _box_face(lx, ly, lz, b[SIZE], b[SIZE + 1], b[SIZE + 2], margin)
+    else:
+        ox, oy, oz = _off_core(b, lx, ly, lz)
+        dist = math.sqrt(ox * ox + oy * oy + oz * oz)
+        found = dist > 0.0 and abs(dist - b[SIZE] - margin) < BAND
+        nx, ny, nz = (ox / dist, oy / dist, oz / dist) if found else (0.0, 0.0, 0.0)
+    if not found:
+        return False, 0.0, 0.0, 0.0
+    nx, ny, nz = _rotate(b, R_END, nx, ny, nz)
+    return True, nx, ny, nz
+
+
+@numba.njit(**JIT)
+def _without_into(mx, my, mz, found, nx, ny, nz):
+    """Return the move (mx, my, mz) less its part into a surface of outward normal n (if found)."""
     into = mx * nx + my * ny + mz * nz
-    if into < 0.0:
+    if found and into < 0.0:
         return mx - into * nx, my - into * ny, mz - into * nz
+    return mx, my, mz
+
+
+@numba.njit(**JIT)
+def _kept(q, r, c, mx, my, mz, planes, boxes, spheres, bodies, margin):
+    """
+    Return the move (mx, my, mz) of point (r, c) without its parts into the surfaces it lies on.
+
+    Every surface the point lies on takes its part out in turn (planes, the boxes' faces
+    (:func:`_box_face`), spheres, then the moving bodies where they are at the end of the
+    step): a point a finger presses onto the ground moves along both. With only the last
+    surface found, that point moved along the finger's surface and away from it, into the
+    ground: the finger scene's largest strain rose from 0.79 to 1.02
+    (``hcloth_contact_bench --sizes 129 --steps 60 --intervals 1 --rounds 16 --option
+    contact_strain=tangent --option contact_sweeps=100``).
+
+    The surfaces are found where the point is now, not once a round: with the normals
+    taken at the start of each round the 129 x 129 table drop reached 0.252 (0.171 this
+    way) and 0.105-0.211 over its last 3 s (``tools/table_flaps.py multigrid --levels 5
+    --option contact_strain=tangent --option contact_sweeps=100``, one run each),
+    presumably as a point pulled off a face during the sweeps kept that face's normal.
+    """
+    x, y, z = q[0, r, c], q[1, r, c], q[2, r, c]
+    for p in range(planes.shape[0]):
+        gap = x * planes[p, 0] + y * planes[p, 1] + z * planes[p, 2] - planes[p, 3] - margin
+        mx, my, mz = _without_into(mx, my, mz, -BAND < gap < BAND, planes[p, 0],
+                                   planes[p, 1], planes[p, 2])
+    for b in range(boxes.shape[0]):
+        found, nx, ny, nz = _box_face(x - boxes[b, 0], y - boxes[b, 1], z - boxes[b, 2],
+                                      boxes[b, 3], boxes[b, 4], boxes[b, 5], margin)
+        mx, my, mz = _without_into(mx, my, mz, found, nx, ny, nz)
+    for s in range(spheres.shape[0]):
+        dx, dy, dz = x - spheres[s, 0], y - spheres[s, 1], z - spheres[s, 2]
+        dist = math.sqrt(dx * dx + dy * dy + dz * dz)
+        found = dist > 0.0 and abs(dist - spheres[s, 3] - margin) < BAND
+        if found:
+            mx, my, mz = _without_into(mx, my, mz, True, dx / dist, dy / dist, dz / dist)
+    for b in range(bodies.shape[0]):
+        found, nx, ny, nz = _body_normal(bodies[b], x, y, z, margin)
+        mx, my, mz = _without_into(mx, my, mz, found, nx, ny, nz)
     return mx, my, mz
 
 
@@ -101,14 +142,15 @@ def _shift(q, qd, dv, r, c, lam, mx, my, mz, h):
 
 
 @numba.njit(**JIT)
-def tangent_strain_limit(q, qd, dv, rest, hold_kind, planes, boxes, spheres, margin,
+def tangent_strain_limit(q, qd, dv, rest, hold_kind, planes, boxes, spheres, bodies, margin,
                          max_stretch, max_sweeps, tolerance, h):
     """
     Limit the springs of a level to ``(1 + max_stretch)`` times their rest length.
 
     Gauss-Seidel sweeps (see the module docstring), every free point movable, a point
-    lying on an obstacle of the scene's arrays only along its surface (where it lies
-    when its spring is corrected). Stops
+    lying on an obstacle of the scene's arrays or on a moving body (packed rows of
+    :mod:`.bodies`, where they are at the end of the step) only along its surface (where
+    it lies when its spring is corrected). Stops
     after a sweep that found no spring over its limit by more than ``tolerance``
     (relative); returns how many sweeps corrected a spring (0: none over).
     """
@@ -134,9 +176,9 @@ def tangent_strain_limit(q, qd, dv, rest, hold_kind, planes, boxes, spheres, mar
                     over = True
                     ux, uy, uz = dx / length, dy / length, dz / length
                     ax, ay, az = _kept(q, r, c, wp * ux, wp * uy, wp * uz, planes, boxes,
-                                       spheres, margin)
+                                       spheres, bodies, margin)
                     bx, by, bz = _kept(q, r2, c2, -wn * ux, -wn * uy, -wn * uz, planes,
-                                       boxes, spheres, margin)
+                                       boxes, spheres, bodies, margin)
                     # how fast the kept moves shorten the spring (to first order)
                     rate = (ax - bx) * ux + (ay - by) * uy + (az - bz) * uz
                     if rate < SMALLEST_RATE * (wp + wn):
