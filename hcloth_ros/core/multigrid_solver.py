@@ -135,8 +135,6 @@ class MultigridSolver(HierarchicalSolver):
     :param smoothing_sweeps: block-Jacobi sweeps before and after each coarse correction.
     :param coarse_sweeps: block-Jacobi sweeps on level 0.
     :param omega: damping of the block-Jacobi sweeps.
-    :param refresh_matrix: assemble the Newton matrix at every Newton iteration (True) or
-        once per step at the first guess (False: cheaper, converges more slowly).
     :param strain_limit: strain limiting on the refinement levels (eq. 7 alone lets their
         springs stretch: 30 % within half a second of the swing).
     :param solved_strain_limit: strain limiting on the solved level, off by default: its
@@ -157,7 +155,7 @@ class MultigridSolver(HierarchicalSolver):
 
     def __init__(self, model, integrator='bdf2', accurate_level=1, newton_iterations=3,
                  cg_iterations=2, cg_rtol=1e-3, smoothing_sweeps=1, coarse_sweeps=4,
-                 omega=0.67, refresh_matrix=True, solved_strain_limit=None,
+                 omega=0.67, solved_strain_limit=None,
                  max_newton_iterations=12, newton_tolerance=NEWTON_TOLERANCE,
                  extra_cg_iterations=10, **options):
         super().__init__(model, **options)
@@ -194,7 +192,6 @@ class MultigridSolver(HierarchicalSolver):
         self.smoothing_sweeps = int(smoothing_sweeps)
         self.coarse_sweeps = int(coarse_sweeps)
         self.omega = float(omega)
-        self.refresh_matrix = bool(refresh_matrix)
         self.max_newton_iterations = max(int(max_newton_iterations), self.newton_iterations)
         self.extra_cg_iterations = int(extra_cg_iterations)
         self.newton_tolerance = float(newton_tolerance)
@@ -373,13 +370,14 @@ class MultigridSolver(HierarchicalSolver):
                     break
                 cg_max = self.extra_cg_iterations
             newton += 1
-            if newton == 1 or self.refresh_matrix:
-                kit.assemble_hierarchy(x_new, hier.shapes, hier.offsets, hier.rest,
-                                       hier.stiffness, hier.contraction,
-                                       self.model.spring_damping, beta, hier.base_mass,
-                                       hier.air_drag, hier.positions, hier.mass,
-                                       hier.coef_uu, hier.coef_iso, hier.directions,
-                                       hier.block_inverse, hier.free, hier.factor)
+            # the matrix at every iteration: assembled once at the first guess (an option
+            # before) Newton diverged on the first step of the swing and the grasp at 65 x 65
+            # (the rest state's matrix has no transverse stiffness the stretched springs have)
+            kit.assemble_hierarchy(x_new, hier.shapes, hier.offsets, hier.rest, hier.stiffness,
+                                   hier.contraction, self.model.spring_damping, beta,
+                                   hier.base_mass, hier.air_drag, hier.positions, hier.mass,
+                                   hier.coef_uu, hier.coef_iso, hier.directions,
+                                   hier.block_inverse, hier.free, hier.factor)
             iterations, _ = kit.multigrid_cg(
                 hier.shapes, hier.offsets, hier.mass, hier.free, hier.coef_uu, hier.coef_iso,
                 hier.directions, hier.block_inverse, hier.factor, hier.rhs, cg_max,
