@@ -34,6 +34,8 @@ BAND = 0.0005
 # A spring whose kept moves shorten it by less than this fraction of a free spring's rate
 # is skipped (both ends pinned against faces the spring is normal to: no move can help).
 SMALLEST_RATE = 0.05
+# Columns of a row a sweep skips or looks at together (see tangent_strain_limit).
+RUN = 16
 # The spring directions limited: right, down, down-right, down-left.
 DIRECTIONS = np.array([0, 2, 4, 6])
 STEP_ROWS = np.asarray(STENCIL_DR)[DIRECTIONS].astype(np.int64)
@@ -142,6 +144,23 @@ def _shift(q, qd, dv, r, c, lam, mx, my, mz, h):
 
 
 @numba.njit(**JIT)
+def _touch(r, c, rows, cols, now, later):
+    """
+    Mark the runs of the springs with an end at point (r, c), which moved.
+
+    Those springs start at the point, left of it, above it, above left and above right
+    (the directions go right and down). Marked for this sweep (those after the point in
+    its order) and for the next (those before it); a run marked more than needed only
+    looks at springs within their limit again.
+    """
+    for dr, dc in ((0, 0), (0, -1), (-1, 0), (-1, -1), (-1, 1)):
+        sr, sc = r + dr, c + dc
+        if 0 <= sr < rows and 0 <= sc < cols:
+            now[sr, sc // RUN] = True
+            later[sr, sc // RUN] = True
+
+
+@numba.njit(**JIT)
 def tangent_strain_limit(q, qd, dv, rest, hold_kind, planes, boxes, spheres, bodies, margin,
                          max_stretch, max_sweeps, tolerance, h):
     """
@@ -152,14 +171,26 @@ def tangent_strain_limit(q, qd, dv, rest, hold_kind, planes, boxes, spheres, bod
     :mod:`.bodies`, where they are at the end of the step) only along its surface (where
     it lies when its spring is corrected). Stops
     after a sweep that found no spring over its limit by more than ``tolerance``
-    (relative); returns how many sweeps corrected a spring (0: none over).
+    (relative); returns how many sweeps found one (0: none over).
+
+    After the first sweep a spring is looked at again only if an end of it moved since
+    it was last looked at (:func:`_touch`, by runs of ``RUN`` columns of a row): the
+    others were within their limit then and are now, so the result is the same as looking
+    at every spring in every sweep. On the 129 x 129 table drop a step's call ran 187
+    sweeps, thousands of corrections in 30-40 of 81 blocks of 16 x 16 cells for the first
+    hundred, a few in a few blocks after.
     """
     rows, cols = hold_kind.shape
+    runs = (cols + RUN - 1) // RUN
+    now = np.ones((rows, runs), dtype=np.bool_)     # runs a sweep looks at
+    later = np.zeros((rows, runs), dtype=np.bool_)  # runs the next sweep looks at
     corrected = 0
     for _ in range(max_sweeps):
         over = False
         for r in range(rows):
             for c in range(cols):
+                if not now[r, c // RUN]:
+                    continue
                 wp = 1.0 if hold_kind[r, c] == FREE else 0.0
                 for e in range(STEP_ROWS.shape[0]):
                     r2, c2 = r + STEP_ROWS[e], c + STEP_COLS[e]
@@ -186,7 +217,11 @@ def tangent_strain_limit(q, qd, dv, rest, hold_kind, planes, boxes, spheres, bod
                     lam = (length - limit) / rate
                     _shift(q, qd, dv, r, c, lam, ax, ay, az, h)
                     _shift(q, qd, dv, r2, c2, lam, bx, by, bz, h)
+                    _touch(r, c, rows, cols, now, later)
+                    _touch(r2, c2, rows, cols, now, later)
         if not over:
             break
         corrected += 1
+        now[:, :] = later
+        later[:, :] = False
     return corrected
