@@ -13,6 +13,7 @@ from dataclasses import dataclass
 import os
 
 from hcloth_ros.core import ClothBuilder, Control, make_scene, make_solver, Placement, State
+from hcloth_ros.core.solvers import CONTACT_STRAIN
 import numpy as np
 import yaml
 
@@ -94,17 +95,18 @@ PARAMS = [
           False),
     Param('solver.dt', 1 / 60, 'simulated seconds per step (s)', 1e-6, 0.1, False),
     Param('solver.substeps', 1, 'solver steps per timer tick', 1, 100, False),
-    Param('solver.contact_rounds', 16, 'most rounds of strain limiting (10 sweeps, every '
-          'point free) and contact on each refinement level and on the finest level when '
-          'it touches an obstacle; the coarser levels then take the finest state; 0: none',
+    Param('solver.contact_rounds', 16, 'most rounds of strain limiting '
+          '(solver.contact_sweeps sweeps, every point free) and contact on each refinement '
+          'level and on the finest level when it touches an obstacle; the coarser levels '
+          'then take the finest state; 0: none',
           0, 1000, False),
     Param('solver.contact_sweeps', 10, 'strain limiting sweeps of each contact round '
           '(tangent: it stops once every spring is within the limit, so give it more, '
           'e.g. 100)', 1, 10000),
     Param('solver.contact_strain', 'jacobi', "contact rounds' strain limiting: jacobi (the "
-          "levels' own) or tangent (Gauss-Seidel, points lying on an obstacle move along "
-          'its surface: holds springs across a table edge; 1.4-2.2x the cost, see README)',
-          choices=('jacobi', 'tangent')),
+          "levels' own) or tangent (Gauss-Seidel, points lying on an obstacle or a moving "
+          'body move along its surface: holds springs across a table edge; about 1.3x the '
+          'step at 129 x 129, see README)', choices=CONTACT_STRAIN),
     Param('self_contact.thickness', 0.0, 'self-contact: finest points stay this far from '
           "the cloth's own triangles and never cross one (m); 0 switches it off", 0.0, 0.1),
     Param('self_contact.friction', 0.3, 'self-contact: friction coefficient between layers',

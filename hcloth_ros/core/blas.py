@@ -35,22 +35,20 @@ def _loaded_openblas():
     return sorted(paths)
 
 
-def _function(library, names):
-    for name in names:
-        function = getattr(library, name, None)
+def _loaded(names):
+    """``[(path, function)]``: the first of ``names`` each loaded OpenBLAS exports."""
+    out = []
+    for path in _loaded_openblas():
+        library = ctypes.CDLL(path)
+        function = next((getattr(library, n) for n in names if hasattr(library, n)), None)
         if function is not None:
-            return function
-    return None
+            out.append((path, function))
+    return out
 
 
 def openblas_threads():
     """``{path: threads}`` of every OpenBLAS loaded in this process."""
-    out = {}
-    for path in _loaded_openblas():
-        getter = _function(ctypes.CDLL(path), _GETTERS)
-        if getter is not None:
-            out[path] = int(getter())
-    return out
+    return {path: int(getter()) for path, getter in _loaded(_GETTERS)}
 
 
 def limit_openblas_threads(count=1):
@@ -60,9 +58,7 @@ def limit_openblas_threads(count=1):
     Empty when numpy uses another BLAS, or none is loaded yet (``import numpy`` first).
     """
     done = []
-    for path in _loaded_openblas():
-        setter = _function(ctypes.CDLL(path), _SETTERS)
-        if setter is not None:
-            setter(int(count))
-            done.append(path)
+    for path, setter in _loaded(_SETTERS):
+        setter(int(count))
+        done.append(path)
     return done

@@ -303,7 +303,7 @@ class Solver:
         return done
 
     def _round_strain_limit(self, k, holds, h, limit, scene):
-        """Strain limiting of one contact round on level k; returns the sweeps that corrected."""
+        """Strain limiting of one contact round on level k; returns its sweeps (0: none over)."""
         lv = self.model.level(k)
         if self.contact_strain == 'jacobi':
             return self.kernels(k).strain_limit(

@@ -64,21 +64,32 @@ def _box_face(x, y, z, hx, hy, hz, margin):
 
 
 @numba.njit(**JIT)
+def _round_face(ox, oy, oz, radius, margin):
+    """
+    Outward normal of a sphere's surface (``radius``) a point lies on, offset o from its centre.
+
+    ``(found, nx, ny, nz)``; none off the surface grown by the margin (or at the centre).
+    """
+    dist = math.sqrt(ox * ox + oy * oy + oz * oz)
+    if not (dist > 0.0 and abs(dist - radius - margin) < BAND):
+        return False, 0.0, 0.0, 0.0
+    return True, ox / dist, oy / dist, oz / dist
+
+
+@numba.njit(**JIT)
 def _body_normal(b, x, y, z, margin):
     """
     Outward normal (world) of moving body row b's surface where a point lies, at the step's end.
 
     ``(found, nx, ny, nz)``; a box as :func:`_box_face` in the body's frame, a sphere or
-    capsule from the nearest point of its core.
+    capsule as :func:`_round_face` from the nearest point of its core.
     """
     lx, ly, lz = _to_local(b, R_END, T_END, x, y, z)
     if int(b[KIND]) == BOX:
         found, nx, ny, nz = _box_face(lx, ly, lz, b[SIZE], b[SIZE + 1], b[SIZE + 2], margin)
     else:
         ox, oy, oz = _off_core(b, lx, ly, lz)
-        dist = math.sqrt(ox * ox + oy * oy + oz * oz)
-        found = dist > 0.0 and abs(dist - b[SIZE] - margin) < BAND
-        nx, ny, nz = (ox / dist, oy / dist, oz / dist) if found else (0.0, 0.0, 0.0)
+        found, nx, ny, nz = _round_face(ox, oy, oz, b[SIZE], margin)
     if not found:
         return False, 0.0, 0.0, 0.0
     nx, ny, nz = _rotate(b, R_END, nx, ny, nz)
@@ -100,12 +111,12 @@ def _kept(q, r, c, mx, my, mz, planes, boxes, spheres, bodies, margin):
     Return the move (mx, my, mz) of point (r, c) without its parts into the surfaces it lies on.
 
     Every surface the point lies on takes its part out in turn (planes, the boxes' faces
-    (:func:`_box_face`), spheres, then the moving bodies where they are at the end of the
-    step): a point a finger presses onto the ground moves along both. With only the last
-    surface found, that point moved along the finger's surface and away from it, into the
-    ground: the finger scene's largest strain rose from 0.79 to 1.02
-    (``hcloth_contact_bench --sizes 129 --steps 60 --intervals 1 --rounds 16 --option
-    contact_strain=tangent --option contact_sweeps=100``).
+    (:func:`_box_face`), spheres (:func:`_round_face`), then the moving bodies where they
+    are at the end of the step): a point on the ground under a finger moves along both,
+    where with only one surface kept it could be moved into the other. (On the contact
+    bench's finger scene the largest strain was 1.02 either way: ``hcloth_contact_bench
+    --sizes 129 --steps 60 --intervals 1 --rounds 16 --option contact_strain=tangent
+    --option contact_sweeps=100``.)
 
     The surfaces are found where the point is now, not once a round: with the normals
     taken at the start of each round the 129 x 129 table drop reached 0.252 (0.171 this
@@ -123,11 +134,9 @@ def _kept(q, r, c, mx, my, mz, planes, boxes, spheres, bodies, margin):
                                       boxes[b, 3], boxes[b, 4], boxes[b, 5], margin)
         mx, my, mz = _without_into(mx, my, mz, found, nx, ny, nz)
     for s in range(spheres.shape[0]):
-        dx, dy, dz = x - spheres[s, 0], y - spheres[s, 1], z - spheres[s, 2]
-        dist = math.sqrt(dx * dx + dy * dy + dz * dz)
-        found = dist > 0.0 and abs(dist - spheres[s, 3] - margin) < BAND
-        if found:
-            mx, my, mz = _without_into(mx, my, mz, True, dx / dist, dy / dist, dz / dist)
+        found, nx, ny, nz = _round_face(x - spheres[s, 0], y - spheres[s, 1],
+                                        z - spheres[s, 2], spheres[s, 3], margin)
+        mx, my, mz = _without_into(mx, my, mz, found, nx, ny, nz)
     for b in range(bodies.shape[0]):
         found, nx, ny, nz = _body_normal(bodies[b], x, y, z, margin)
         mx, my, mz = _without_into(mx, my, mz, found, nx, ny, nz)
