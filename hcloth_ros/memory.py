@@ -17,8 +17,11 @@ small scene (interpreter, numba's compiled kernels, rclpy): 215 MB measured.
 # peak bytes per point (all levels), per solver; self-contact adds its grid and pairs
 # (the measured peaks at 22,325 points, 129 x 129 finest, rounded up by 2-5 %)
 BYTES_PER_POINT = {'multigrid': 1050, 'hierarchical': 380, 'implicit': 520,
-                   'explicit': 360, 'approx': 360}
+                   'explicit': 380, 'approx': 380}
 SELF_CONTACT_BYTES = 220
+# multigrid with solver.newton_tolerance_steps: moved keeps its solved level's last solve
+# (positions and velocities, 48 bytes a point of that level; counted on every point)
+MOVED_TOLERANCE_BYTES = 48
 BASE = 215e6
 MB = 1e6
 
@@ -40,6 +43,8 @@ def estimate(values):
     per_point = BYTES_PER_POINT[values['solver.name']]
     if float(values['self_contact.thickness']) > 0:
         per_point += SELF_CONTACT_BYTES
+    if values['solver.name'] == 'multigrid' and values['solver.newton_tolerance_steps'] == 'moved':
+        per_point += MOVED_TOLERANCE_BYTES
     return BASE + per_point * points, points
 
 

@@ -291,6 +291,47 @@ def test_a_pushed_cloth_is_solved_to_its_newton_tolerance():
     assert rms('tolerance') < rms('fixed') / 3
 
 
+def test_moved_tolerance_steps_iterate_past_the_fixed_count_only_from_a_moved_start():
+    """
+    ``newton_tolerance_steps='moved'``: the tolerance only for starts something moved.
+
+    33 x 33 swing solved on the finest level: every step after the first starts where the
+    last solve left the cloth and takes the fixed 3 iterations (with the tolerance on
+    every step, the default ``'all'``, 21 of the 119 took more); points moved a few
+    millimetres, or a ball rising into the cloth pushing points out every step, and steps
+    take more.
+    """
+    counts, left = {}, {}
+    for steps in ('all', 'moved'):
+        model = build_model(33, 3)
+        state = State.at_rest(model)
+        control = prepare('swing', model, state).control
+        solver = make_solver('multigrid', model, accurate_level=None,
+                             newton_tolerance_steps=steps)
+        reports = [solver.step(state, control, H) for _ in range(120)]
+        counts[steps] = [r.newton_iterations for r in reports]
+        left[steps] = [r.extra.get('fixed_count_residual') for r in reports]
+    assert counts['moved'][1:] == [3] * 119
+    assert sum(c > 3 for c in counts['all']) > 10
+    # the residual after the fixed count, in tolerances: above 1 exactly where it went on
+    assert [c > 3 for c in counts['all']] == [r > 1.0 for r in left['all']]
+    assert left['moved'][1:] == [None] * 119      # not even taken
+    state.q[2] += np.random.default_rng(3).normal(0.0, 0.003, state.q[2].shape)
+    assert solver.step(state, control, H).newton_iterations > 3     # the 'moved' one
+    with pytest.raises(ValueError, match='newton_tolerance_steps'):
+        make_solver('multigrid', model, newton_tolerance_steps='some')
+
+    model = build_model(33, 3)
+    state, control = State.at_rest(model), Control(model)
+    control.bodies.add('ball', 'sphere', [0.1], friction=0.5)
+    solver = make_solver('multigrid', model, accurate_level=None, newton_tolerance_steps='moved')
+    counts = []
+    for i in range(30):     # 20 cm below the falling cloth at 1 m/s: they meet in step 9
+        control.bodies.set_pose('ball', np.eye(3), (0.0, 0.5, 1.2 + (i + 1) * H))
+        counts.append(solver.step(state, control, H).newton_iterations)
+    assert counts[:8] == [3] * 8 and min(counts[8:]) > 3
+
+
 def test_two_runs_are_bit_identical_and_pins_exact():
     runs = [swung(33, 3, 0.5)[2] for _ in range(2)]
     for a, b in zip(runs[0].q + runs[0].qd, runs[1].q + runs[1].qd):

@@ -91,6 +91,18 @@ def test_contact_strain_parameters_reach_the_solver():
             params.resolve({name: value})
 
 
+def test_newton_tolerance_steps_parameter_reaches_the_solver():
+    values = params.resolve({'cloth.resolution': [5, 5], 'cloth.levels': 2})
+    assert params.build_solver(params.build_model(values), values).newton_tolerance_steps \
+        == 'all'
+    values = params.resolve({'cloth.resolution': [5, 5], 'cloth.levels': 2,
+                             'solver.newton_tolerance_steps': 'moved'})
+    assert params.build_solver(params.build_model(values), values).newton_tolerance_steps \
+        == 'moved'
+    with pytest.raises(ValueError, match=r'solver\.newton_tolerance_steps'):
+        params.resolve({'solver.newton_tolerance_steps': 'some'})
+
+
 def test_command_line_assignments_are_yaml_values():
     assert params.assignments(['solver.dt=0.01', 'cloth.levels=5', 'a=null', 'b=[1, 2]',
                                'c=x=y']) == {'solver.dt': 0.01, 'cloth.levels': 5,
