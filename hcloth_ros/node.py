@@ -105,7 +105,7 @@ CATCH_UP = 6        # most ticks one timer call runs to make up for late calls
 # the stress suite's requests with 10^6-element arrays held the executor 0.2-0.6 s in
 # rclpy's own conversion, and with 6 the node lost 2-20 % of an 8 s phase's ticks here
 LAG = 30
-FIRST_START = 'about 25-35 s on 2 cores'
+FIRST_START = 'about 30-40 s on 2 cores'
 
 
 class ClothSimNode(Node):

@@ -108,13 +108,15 @@ PARAMS = [
           'level and on the finest level when it touches an obstacle; the coarser levels '
           'then take the finest state; 0: none',
           0, 1000, False),
-    Param('solver.contact_sweeps', 10, 'strain limiting sweeps of each contact round '
-          '(tangent: it stops once every spring is within the limit, so give it more, '
-          'e.g. 100)', 1, 10000),
-    Param('solver.contact_strain', 'jacobi', "contact rounds' strain limiting: jacobi (the "
-          "levels' own) or tangent (Gauss-Seidel, points lying on an obstacle or a moving "
-          'body move along its surface: holds springs across a table edge; about 1.3x the '
-          'step at 129 x 129, see README)', choices=CONTACT_STRAIN),
+    Param('solver.contact_sweeps', 0, 'most strain limiting sweeps of each contact round; '
+          "0: the strain limiting's own (tangent 300: it stops once every spring is within "
+          'the limit; jacobi 10)', 0, 10000),
+    Param('solver.contact_strain', 'tangent', "contact rounds' strain limiting: tangent "
+          '(Gauss-Seidel, points lying on an obstacle or a moving body move along its '
+          'surface, points a body presses into the ground stay where it holds them: holds '
+          "springs across a table edge and round a finger) or jacobi (the levels' own, "
+          'cheaper where nothing presses: about 0.75x the step on the 129 x 129 table '
+          'drop, see README)', choices=CONTACT_STRAIN),
     Param('self_contact.thickness', 0.0, 'self-contact: finest points stay this far from '
           "the cloth's own triangles and never cross one (m); 0 switches it off", 0.0, 0.1),
     Param('self_contact.friction', 0.3, 'self-contact: friction coefficient between layers',
@@ -333,7 +335,7 @@ def build_solver(model, values):
                        self_contact_interval=int(values['self_contact.interval']))
     return make_solver(name, model, external=values['solver.external'], strain_limit=limit,
                        contact_rounds=int(values['solver.contact_rounds']),
-                       contact_sweeps=int(values['solver.contact_sweeps']),
+                       contact_sweeps=int(values['solver.contact_sweeps']) or None,
                        contact_strain=values['solver.contact_strain'], **options)
 
 

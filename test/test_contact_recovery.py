@@ -47,7 +47,9 @@ def _table_strain(contact_rounds, levels=3, rising=None, **options):
 
 def test_a_cloth_folding_over_a_table_edge_keeps_the_strain_limit():
     """
-    Under 1.5 x the 10 % limit over the whole drop at 33 x 33 (0.111 measured).
+    Under 1.5 x the 10 % limit over the whole drop at 33 x 33.
+
+    0.106 measured (0.111 with the rounds' Jacobi strain limiting).
 
     Without the rounds of strain limiting and contact on the refinement levels (coarser
     levels then taking the finest state) the refined points wrap the edge between
@@ -59,7 +61,10 @@ def test_a_cloth_folding_over_a_table_edge_keeps_the_strain_limit():
 
 def test_the_table_edge_strain_holds_at_65_by_65():
     """
-    0.134 measured; 0.22 when only the finest level ran the rounds.
+    Under 1.5 x the 10 % limit at 65 x 65 too.
+
+    0.106 measured (0.131 with the rounds' Jacobi strain limiting); 0.22 when only the
+    finest level ran the rounds (Jacobi).
 
     Each refinement level that touches the table wraps it before the next level steps, so
     the 65 x 65 level inherits points that already lie round the edge.
@@ -69,26 +74,25 @@ def test_the_table_edge_strain_holds_at_65_by_65():
 
 def test_strain_limiting_along_the_table_holds_the_edge_at_129_by_129():
     """
-    Under 1.5 x the 10 % limit over the whole drop with ``contact_strain='tangent'``.
+    Under 1.5 x the 10 % limit over the whole drop with the default tangent strain limiting.
 
-    With up to 300 sweeps a round: 0.115 measured (0.77 with the rounds' Jacobi strain
-    limiting, whose corrections of the springs across the edge contact undoes; with 100
-    sweeps 0.171 at the landing, 0.132 over the last 3 s).
+    With up to 300 sweeps a round (its default): 0.115 measured (0.77 with the rounds'
+    Jacobi strain limiting, whose corrections of the springs across the edge contact
+    undoes; with 100 sweeps 0.171 at the landing, 0.132 over the last 3 s).
     """
-    assert _table_strain(16, levels=5, contact_strain='tangent',
-                         contact_sweeps=300) < 1.5 * 0.1
+    assert _table_strain(16, levels=5) < 1.5 * 0.1
+    assert _table_strain(16, levels=5, contact_strain='jacobi') > 0.5
 
 
 def test_strain_limiting_along_a_moving_table_holds_its_edge():
     """
     The tangent strain limiting moves points along moving bodies' surfaces too.
 
-    0.105 measured with ``contact_strain='tangent'``, 0.43 with the rounds' Jacobi strain
-    limiting (``tools/table_flaps.py multigrid --levels 4 --rising 0.05``).
+    0.105 measured with the default tangent strain limiting, 0.43 with the rounds' Jacobi
+    strain limiting (``tools/table_flaps.py multigrid --levels 4 --rising 0.05``).
     """
-    assert _table_strain(16, levels=4, rising=0.05, contact_strain='tangent',
-                         contact_sweeps=100) < 1.5 * 0.1
-    assert _table_strain(16, levels=4, rising=0.05) > 0.3
+    assert _table_strain(16, levels=4, rising=0.05) < 1.5 * 0.1
+    assert _table_strain(16, levels=4, rising=0.05, contact_strain='jacobi') > 0.3
 
 
 def _about_z(angle):
@@ -129,8 +133,8 @@ def test_the_tangent_strain_limiting_keeps_a_spring_across_an_edge_on_its_faces(
     qd, dv = np.zeros_like(q), np.zeros_like(q)
     hold = np.zeros((1, 2), dtype=np.int8)
     sweeps = contact_strain.tangent_strain_limit(
-        q, qd, dv, rest, hold, scene.planes, scene.boxes, scene.spheres, bodies, margin, 0.1,
-        100, 0.005, DT)
+        q, qd, dv, rest, hold, scene.planes, scene.boxes, scene.spheres, bodies, margin,
+        scene.friction, 0.1, 100, 0.005, DT)
     assert 1 <= sweeps < 100
     length = np.linalg.norm(q[:, 0, 1] - q[:, 0, 0])
     assert 0.012 * (1.0 - 1e-9) <= length <= 0.012 * 1.005
@@ -142,8 +146,40 @@ def test_the_tangent_strain_limiting_keeps_a_spring_across_an_edge_on_its_faces(
     free = np.array([[[0.0, 0.02]], [[0.0, 0.0]], [[1.0, 1.0]]])
     contact_strain.tangent_strain_limit(free, np.zeros_like(free), np.zeros_like(free),
                                         rest, hold, scene.planes, scene.boxes,
-                                        scene.spheres, bodies, margin, 0.1, 1, 0.005, DT)
+                                        scene.spheres, bodies, margin, scene.friction, 0.1,
+                                        1, 0.005, DT)
     assert free[0, 0, 0] == pytest.approx(0.004) and free[0, 0, 1] == pytest.approx(0.016)
+
+
+@pytest.mark.parametrize('strain', ['jacobi', 'tangent'])
+def test_a_finger_pressing_the_cloth_into_the_ground_drags_it_within_the_limit(strain):
+    """
+    A finger pressing the cloth into the ground: the contact bench's scene at 65 x 65.
+
+    A capsule reaching 2 mm below the cloth on the
+    ground drags it 0.2 m along x in a second. Tangent strain limiting leaves the points it
+    presses where the finger's friction holds them (``_held``) and corrects their free
+    neighbours instead: largest strain 0.105 over the run (10 % limit, 0.5 % tolerance);
+    Jacobi moves both ends, the finger puts the pressed one back every round: 0.35 (the
+    tangent kernel before it left pressed points movable: 0.65). Either way the cloth goes
+    with the finger (0.18 m on average).
+    """
+    from hcloth_ros.bench.self_contact import _move_finger, scene_setup
+    model, state, control = scene_setup(65, 'finger')
+    solver = make_solver('multigrid', model, contact_rounds=16, contact_strain=strain)
+    top = model.level_count - 1
+    start = state.q[top][0].copy()
+    worst = 0.0
+    for i in range(61):
+        _move_finger(control, i)
+        report = solver.step(state, control, DT)
+        assert report.ok
+        worst = max(worst, report.max_strain)
+    assert 0.15 < np.mean(state.q[top][0] - start) < 0.21
+    if strain == 'tangent':
+        assert worst < 0.11             # the limit and its tolerance
+    else:
+        assert worst > 0.15             # issue 10's bound: 1.5 times the limit
 
 
 def test_an_unknown_contact_strain_is_refused():

@@ -81,12 +81,16 @@ def test_self_contact_parameters_reach_the_solver():
 def test_contact_strain_parameters_reach_the_solver():
     values = params.resolve({'cloth.resolution': [5, 5], 'cloth.levels': 2})
     solver = params.build_solver(params.build_model(values), values)
+    assert (solver.contact_strain, solver.contact_sweeps) == ('tangent', 300)
+    values = params.resolve({'cloth.resolution': [5, 5], 'cloth.levels': 2,
+                             'solver.contact_strain': 'jacobi'})
+    solver = params.build_solver(params.build_model(values), values)
     assert (solver.contact_strain, solver.contact_sweeps) == ('jacobi', 10)
     values = params.resolve({'cloth.resolution': [5, 5], 'cloth.levels': 2,
-                             'solver.contact_strain': 'tangent', 'solver.contact_sweeps': 100})
+                             'solver.contact_strain': 'jacobi', 'solver.contact_sweeps': 100})
     solver = params.build_solver(params.build_model(values), values)
-    assert (solver.contact_strain, solver.contact_sweeps) == ('tangent', 100)
-    for name, value in (('solver.contact_strain', 'gauss'), ('solver.contact_sweeps', 0)):
+    assert (solver.contact_strain, solver.contact_sweeps) == ('jacobi', 100)
+    for name, value in (('solver.contact_strain', 'gauss'), ('solver.contact_sweeps', -1)):
         with pytest.raises(ValueError, match=name.replace('.', r'\.')):
             params.resolve({name: value})
 

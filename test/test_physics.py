@@ -180,8 +180,11 @@ def test_strain_limiting_bounds_stretch_of_hierarchical_cloth():
 def test_cloth_dropped_on_table_rests_and_drapes():
     # 1 m x 1 m cloth dropped from 0.3 m above a 0.6 m x 0.6 m table top at 0.7 m.
     # After 4 s: no point of any level inside the table or below the ground; the part
-    # over the table lies on it (at top + margin, within 1 mm); cloth beyond the table
-    # edge hangs well below the top; nothing moves faster than 5 cm/s.
+    # over the table lies on it (at top + margin, within 2.5 mm: the contact rounds'
+    # tangent strain limiting lets a point leave the surface, and the paper's soft springs
+    # leave it much to limit, so the part near the edge tents up by up to 1.7 mm; within
+    # 1 mm with the rounds' Jacobi strain limiting); cloth beyond the table edge hangs
+    # well below the top; nothing moves faster than 5 cm/s.
     table = (0.0, 0.0, 0.35, 0.3, 0.3, 0.35)
     scene = make_scene(ground_z=0.0, boxes=[table], friction=0.5, margin=0.002)
     model = ClothBuilder(resolution=(9, 9), level_count=3, scene=scene,
@@ -198,7 +201,7 @@ def test_cloth_dropped_on_table_rests_and_drapes():
         assert p[:, 2].min() >= 0.002 - 1e-9
     p = state.points(2)
     on_top = np.all(np.abs(p[:, :2]) < 0.3 - 2 * model.level(2).du, axis=1)
-    assert np.allclose(p[on_top, 2], 0.702, atol=1e-3)
+    assert np.allclose(p[on_top, 2], 0.702, atol=2.5e-3)
     beyond = np.any(np.abs(p[:, :2]) > 0.45, axis=1)
     assert np.all(p[beyond, 2] < 0.7 - 0.1)
     assert np.abs(state.velocities(2)).max() < 0.05

@@ -86,7 +86,8 @@ def _exercise(model, solvers, parallel, energy, self_contact=False, bodies=False
         builds['serial'].tangent_strain_limit(
             state.q[1], state.qd[1], np.zeros_like(state.q[1]), model.level(1).rest,
             control.holds(1).kind, scene.planes, scene.boxes, scene.spheres,
-            control.bodies.packed(), float(scene.margin), 0.1, 10, 0.005, 1e-3)
+            control.bodies.packed(), float(scene.margin), float(scene.friction), 0.1, 10,
+            0.005, 1e-3)
     state = State.at_rest(model)
     lv, kit = model.level(0), builds['serial']
     if energy:

@@ -20,8 +20,8 @@ take each move divided by ``h``, as :mod:`~hcloth_ros.core.kernels.strain` does.
 
 import math
 
-from hcloth_ros.core.kernels.bodies import _off_core, _rotate, _to_local, BOX, KIND, R_END, \
-    SIZE, T_END
+from hcloth_ros.core.kernels.bodies import _inside, _off_core, _pressed, _rotate, _to_local, \
+    BOX, FRICTION, KIND, R_END, SIZE, T_END
 from hcloth_ros.core.kernels.jit import JIT
 from hcloth_ros.core.kernels.layout import FREE, STENCIL_DC, STENCIL_DR
 import numba
@@ -144,6 +144,30 @@ def _kept(q, r, c, mx, my, mz, planes, boxes, spheres, bodies, margin):
 
 
 @numba.njit(**JIT)
+def _held(q, r, c, bodies, planes, plane_friction, margin):
+    """
+    Whether a moving body presses point (r, c) into a plane and friction holds it there.
+
+    The moving bodies' contact puts such a point back where the body's motion (or the
+    plane) holds it whatever strain limiting did (:func:`.bodies._respond`), so a move of
+    it here is undone and its spring's other end must take the whole correction. Moved
+    like a free point, pressed points under the contact bench's finger were put back
+    every round and held the springs between them and their free neighbours at 0.63
+    strain (1.02 at the worst step).
+    """
+    x, y, z = q[0, r, c], q[1, r, c], q[2, r, c]
+    for i in range(bodies.shape[0]):
+        b = bodies[i]
+        if b[FRICTION] == 0.0 and plane_friction == 0.0:
+            continue        # neither surface holds it
+        lx, ly, lz = _to_local(b, R_END, T_END, x, y, z)
+        if _inside(b, margin, lx, ly, lz) and \
+                _pressed(q, r, c, b, planes, margin, lx, ly, lz)[0] > 0.0:
+            return True
+    return False
+
+
+@numba.njit(**JIT)
 def _shift(q, qd, dv, r, c, lam, mx, my, mz, h):
     """Move point (r, c) by ``lam`` times (mx, my, mz); its velocities follow."""
     for d, m in ((0, mx), (1, my), (2, mz)):
@@ -171,12 +195,13 @@ def _touch(r, c, rows, cols, now, later):
 
 @numba.njit(**JIT)
 def tangent_strain_limit(q, qd, dv, rest, hold_kind, planes, boxes, spheres, bodies, margin,
-                         max_stretch, max_sweeps, tolerance, h):
+                         plane_friction, max_stretch, max_sweeps, tolerance, h):
     """
     Limit the springs of a level to ``(1 + max_stretch)`` times their rest length.
 
-    Gauss-Seidel sweeps (see the module docstring), every free point movable, a point
-    lying on an obstacle of the scene's arrays or on a moving body (packed rows of
+    Gauss-Seidel sweeps (see the module docstring), every free point movable but those a
+    moving body presses into a plane of friction ``plane_friction`` (:func:`_held`), a
+    point lying on an obstacle of the scene's arrays or on a moving body (packed rows of
     :mod:`.bodies`, where they are at the end of the step) only along its surface (where
     it lies when its spring is corrected). Stops
     after a sweep that found no spring over its limit by more than ``tolerance``
@@ -196,6 +221,8 @@ def tangent_strain_limit(q, qd, dv, rest, hold_kind, planes, boxes, spheres, bod
     now = np.ones((rows, runs), dtype=np.bool_)     # runs a sweep looks at
     later = np.zeros((rows, runs), dtype=np.bool_)  # runs the next sweep looks at
     corrected = 0
+    # a body can press a point into a plane (see _held)
+    pressing = bodies.shape[0] > 0 and planes.shape[0] > 0
     for _ in range(max_sweeps):
         over = False
         for r in range(rows):
@@ -216,6 +243,15 @@ def tangent_strain_limit(q, qd, dv, rest, hold_kind, planes, boxes, spheres, bod
                     if wp + wn == 0.0 or not length > limit * (1.0 + tolerance):
                         continue
                     over = True
+                    if pressing:
+                        if wp > 0.0 and _held(q, r, c, bodies, planes, plane_friction,
+                                              margin):
+                            wp = 0.0
+                        if wn > 0.0 and _held(q, r2, c2, bodies, planes, plane_friction,
+                                              margin):
+                            wn = 0.0
+                        if wp + wn == 0.0:
+                            continue
                     ux, uy, uz = dx / length, dy / length, dz / length
                     ax, ay, az = _kept(q, r, c, wp * ux, wp * uy, wp * uz, planes, boxes,
                                        spheres, bodies, margin)
