@@ -131,3 +131,13 @@ def test_tiny_benchmark_writes_well_formed_outputs(tmp_path):
     assert rest['hierarchical exact L1, 10 % strain limit']['drop_error'] > 0.05
     assert set(results['fig6']) == {'(1, 1)', '(0.5, 1)'}
     assert any(r['simulator'].startswith('hcloth') for r in results['peers'])
+
+
+def test_the_targets_options_reach_both_multigrid_rows_only():
+    from hcloth_ros.bench.targets import methods, METHODS
+    assert methods() == list(METHODS)
+    got = {label: options for label, _, options in
+           methods({'newton_tolerance_steps': 'moved'})}
+    assert got['multigrid'] == {'newton_tolerance_steps': 'moved'}
+    assert got['multigrid full'] == {'accurate_level': None, 'newton_tolerance_steps': 'moved'}
+    assert got['hierarchical'] == {}

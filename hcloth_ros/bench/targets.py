@@ -2,6 +2,7 @@
 The accurate solver against its targets: swing and grasp at 33 x 33 and 65 x 65, rest shape.
 
     python -m hcloth_ros.bench.targets [--sizes 33,65] [--repeats 3] [--json PATH]
+                                       [--option NAME=VALUE ...]
 
 For each finest size (level 0 9 x 9, so 3 and 4 levels) and scenario it computes the
 converged reference (:mod:`.reference`: symplectic Euler at a small step, about 4 min at
@@ -13,7 +14,9 @@ converged reference (:mod:`.reference`: symplectic Euler at a small step, about 
 
 It prints the RMS vertex distance to the reference over the whole 2 s and over the first
 second (the swing is chaotic after about 1.6 s), the largest strain and wall seconds per
-simulated second (the best of ``--repeats`` runs: the machine is shared). Last, the rest
+simulated second (the best of ``--repeats`` runs: the machine is shared). ``--option``
+adds a solver option to both ``multigrid`` rows (e.g. ``newton_tolerance_steps=moved``;
+YAML values). Last, the rest
 shape: the cloth hung from its top corners settles (air drag 1 N s/m^3) and its drop below
 the pins is compared with the energy minimum of :mod:`.equilibrium`.
 """
@@ -36,14 +39,20 @@ METHODS = (('multigrid', 'multigrid', {}),
            ('hierarchical', 'hierarchical', {}))
 
 
-def accuracy(sizes, repeats, progress=print):
-    """Rows of the target table: one per size, scenario and method."""
+def methods(extra=None):
+    """:data:`METHODS` with the solver options ``extra`` added to the multigrid ones."""
+    return [(label, solver, dict(options, **(extra or {})) if solver == 'multigrid'
+             else options) for label, solver, options in METHODS]
+
+
+def accuracy(sizes, repeats, progress=print, extra=None):
+    """Rows of the target table: one per size, scenario and method (see :func:`methods`)."""
     rows = []
     for n in sizes:
         for scenario in ('swing', 'grasp'):
             progress(f'reference {scenario} {n} x {n} ...')
             ref, check = reference(scenario, n, 2.0)
-            for label, solver, options in METHODS:
+            for label, solver, options in methods(extra):
                 runs = [simulate(scenario, solver, n, LEVELS[n], DT, 2.0, options=options)
                         for _ in range(repeats)]
                 run = runs[0]
@@ -78,14 +87,18 @@ def main(argv=None):
     parser.add_argument('--sizes', default='33,65')
     parser.add_argument('--repeats', type=int, default=3)
     parser.add_argument('--json', metavar='PATH')
+    parser.add_argument('--option', action='append', default=[], metavar='NAME=VALUE',
+                        help='a multigrid solver option (YAML value), repeatable')
     args = parser.parse_args(argv)
+    from hcloth_ros.params import assignments
+    extra = assignments(args.option)
     import numba
     numba.set_num_threads(1)
     print(f'targets at dt = 1/60 s, 1 numba thread, load average {os.getloadavg()[0]:.2f} '
           f'on {os.cpu_count()} CPUs', flush=True)
     sizes = [int(s) for s in args.sizes.split(',') if s]
     results = {'accuracy': accuracy(sizes, args.repeats,
-                                    lambda text: print(text, flush=True))}
+                                    lambda text: print(text, flush=True), extra)}
     rest = results['rest_shape'] = rest_shape()
     print(f'rest shape, {rest["n"]} x {rest["n"]} hung from two corners: drop '
           f'{rest["drop"]:.5f} m, energy minimum {rest["energy_minimum_drop"]:.5f} m '
