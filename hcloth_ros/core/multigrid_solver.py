@@ -7,10 +7,11 @@ by an implicit integrator of the full spring model (:mod:`.kernels.bdf2`): BDF2 
 backward Euler), or backward Euler throughout. Each step runs a fixed number of Newton
 iterations from an extrapolated first guess; each Newton iteration solves its linear
 system by CG preconditioned with a V-cycle over the levels ``0 .. accurate_level``
-(:mod:`.kernels.multigrid`), also for a fixed most number of iterations. A step that
-starts from a state something moved after the last solve (contact, self-contact, an edit)
-and whose residual is still large after them takes more, up to a cap; the levels the
-V-cycle needs are the model's own.
+(:mod:`.kernels.multigrid`), also for a fixed most number of iterations. A step whose
+residual is still large after them (a cloth that contact and self-contact pushed about)
+takes more, up to a cap (with ``newton_tolerance_steps='moved'`` only a step that starts
+from a state something moved after the last solve); the levels the V-cycle needs are the
+model's own.
 
 Levels finer than ``accurate_level`` follow the paper's Table 1 (constraint C and
 eq. 7) from the accurate level's velocity change: large-scale motion from the accurate
@@ -29,9 +30,9 @@ from hcloth_ros.core.solvers import HierarchicalSolver
 import numpy as np
 
 INTEGRATORS = ('bdf2', 'backward_euler')
-# which steps iterate Newton to its tolerance: those starting from a state something moved
-# after the last solve (see MultigridSolver._from_own_solve), or all
-TOLERANCE_STEPS = ('moved', 'all')
+# which steps iterate Newton to its tolerance: all, or those starting from a state something
+# moved after the last solve (see MultigridSolver._from_own_solve)
+TOLERANCE_STEPS = ('all', 'moved')
 
 
 def _grids_below(model, smallest=3):
