@@ -6,6 +6,7 @@ The fold demo in the engine alone, with the node's command timing drawn at rando
     .venv/bin/python tools/fold_jitter.py --runs 8 --lift 0.25 --stop-short 0.01 --translate-only
     .venv/bin/python tools/fold_jitter.py --runs 8 -p solver.name=multigrid \
         -p solver.accurate_level=0
+    .venv/bin/python tools/fold_jitter.py --runs 8 --shed 180 --restore 270
 
 The demo's client samples its path at 30 Hz on the simulation's clock and its messages
 reach the node one or two ticks later, so which tick a command lands on varies from run
@@ -17,7 +18,9 @@ seed. It prints the fold measures of each run, as the demo does; a failure seen 
 runs of the demo shows here with the seed that reproduces it. ``--lift`` and
 ``--stop-short`` change the client's path (its ``LIFT`` and ``SHORT``), ``--translate-only``
 keeps the grippers from turning (the client before it turned them), ``-p NAME=VALUE``
-overrides a parameter of the scene (a YAML value).
+overrides a parameter of the scene (a YAML value). ``--shed N --restore M`` drop the finest
+level at tick N and bring it back at tick M, as the node's governor does when ticks overrun
+(the restored level starts from the coarser state, the grippers re-take their points on it).
 """
 
 import argparse
@@ -49,11 +52,12 @@ def client_messages(t, starts, far_y, turn=True):
     return out
 
 
-def run(seed, turn=True, overrides=None):
+def run(seed, turn=True, overrides=None, shed=None, restore=None):
     """
     Fold once with the timing drawn from ``seed``; return the grids before and after.
 
-    ``overrides``: parameter values that replace the fold scene's.
+    ``overrides``: parameter values that replace the fold scene's; ``shed``, ``restore``:
+    the ticks at which the finest level is dropped and brought back (None: never).
     """
     rng = np.random.default_rng(seed)
     values = params.load_file(params.config_path('fold.yaml'))
@@ -61,7 +65,10 @@ def run(seed, turn=True, overrides=None):
     values = params.resolve(values)
     sim = Simulation.build(values)
     k = sim.solver.levels()[-1]
-    before = sim.state.points(k).copy()
+    levels = {} if shed is None else {shed: k - 1}
+    if restore is not None:
+        levels[restore] = k
+    before = [sim.state.points(level).copy() for level in range(k + 1)]
     pts = sim.state.points_by_id(sim.model, k)
     starts = {'left': pts[np.argmin(pts[:, 0] + pts[:, 1])],
               'right': pts[np.argmax(pts[:, 0] - pts[:, 1])]}
@@ -74,6 +81,8 @@ def run(seed, turn=True, overrides=None):
             lag = 2 if rng.random() < 0.25 else 1
             sent = client_messages((j - first) * sim.dt, starts, far_y, turn)
             inbox += [(j + lag,) + m for m in sent]
+        if j in levels:
+            sim.apply(('levels', levels[j]))
         for item in [m for m in inbox if m[0] <= j]:
             inbox.remove(item)
             if item[1] == 'pose':
@@ -83,7 +92,8 @@ def run(seed, turn=True, overrides=None):
         bank.apply(sim.apply, lambda p: points_within(
             sim.state.points_by_id(sim.model, sim.solver.levels()[-1]), p, RADIUS))
         sim.advance()
-    return before, sim.state.points(sim.solver.levels()[-1]).copy()
+    finest = sim.solver.levels()[-1]
+    return before[finest], sim.state.points(finest).copy()
 
 
 def main(argv=None):
@@ -99,12 +109,14 @@ def main(argv=None):
                         help='the grippers do not turn with the corners')
     parser.add_argument('-p', '--param', action='append', default=[], metavar='NAME=VALUE',
                         help='a parameter override (YAML value), repeatable')
+    parser.add_argument('--shed', type=int, help='drop the finest level at this tick')
+    parser.add_argument('--restore', type=int, help='bring it back at this tick')
     args = parser.parse_args(argv)
     fold_client.LIFT, fold_client.SHORT = args.lift, args.stop_short
     overrides = params.assignments(args.param)
     for seed in range(args.seed, args.seed + args.runs):
         start = time.perf_counter()
-        before, after = run(seed, not args.translate_only, overrides)
+        before, after = run(seed, not args.translate_only, overrides, args.shed, args.restore)
         side = int(round(np.sqrt(before.size / 3)))
         grids = (g.reshape(side, side, 3) for g in (before, after))
         print(f'seed {seed}: {describe(fold_metrics(*grids))} '
