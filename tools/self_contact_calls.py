@@ -1,7 +1,8 @@
 """
 Self-contact's kernel calls step by step on the contact bench's folded drop.
 
-    .venv/bin/python tools/self_contact_calls.py [--size 129] [--steps 60] [--every 5]
+    .venv/bin/python tools/self_contact_calls.py [--size 129] [--steps 60] [--every 5] \
+        [--contact-strain jacobi]
 
 The folded cloth of ``hcloth_contact_bench`` (``multigrid``, thickness 4 mm, one numba
 thread) falls onto the ground; each self-contact kernel call of the finest level is timed
@@ -10,7 +11,9 @@ moved and whether it kept the patch boxes of the call before. Last, the median o
 step's kernel time over all steps and over the steps from 20 on, once the layers rest
 on each other (where a step makes two calls: the step's own, and the one after the
 ground's rounds of strain limiting and contact), and the mean, 90th percentile and largest
-(the steps where the settling layers slide into each other again).
+(the steps where the settling layers slide into each other again). ``--contact-strain``
+picks the contact rounds' strain limiting (the solver's ``contact_strain``, default its
+own).
 """
 
 import argparse
@@ -25,12 +28,15 @@ def main(argv=None):
     parser.add_argument('--size', type=int, default=129)
     parser.add_argument('--steps', type=int, default=60)
     parser.add_argument('--every', type=int, default=5, help='print every n-th step')
+    parser.add_argument('--contact-strain', choices=('tangent', 'jacobi'),
+                        help="the contact rounds' strain limiting (default: the solver's)")
     args = parser.parse_args(argv)
     numba.set_num_threads(1)
     from hcloth_ros.bench.self_contact import scene_setup
     from hcloth_ros.core import make_solver
     model, state, control = scene_setup(args.size, 'folded')
-    solver = make_solver('multigrid', model, thickness=0.004)
+    options = {} if args.contact_strain is None else {'contact_strain': args.contact_strain}
+    solver = make_solver('multigrid', model, thickness=0.004, **options)
     solver.step(state, control, 1 / 60)            # compile or load
     finest = model.level_count - 1
     kit = solver.kernels(finest)
