@@ -90,11 +90,12 @@ PARAMS = [
           1, 100),
     Param('solver.newton_tolerance', 0.3, 'multigrid: residual a step may leave, in units of '
           'the momentum the weight gives the cloth over the step', 1e-6, 1e6),
-    Param('solver.newton_tolerance_steps', 'all', 'multigrid: which steps iterate to '
-          'solver.newton_tolerance: all, or moved (those starting from a state something '
-          'moved after the last solve: contact, self-contact, an edit, a start; a free '
-          'cloth takes the fixed count at a fixed cost, for real time on large meshes; '
-          'less accurate solved on a fine level, unstable for stiff cloth at large steps)',
+    Param('solver.newton_tolerance_steps', 'moved', 'multigrid: which steps iterate to '
+          'solver.newton_tolerance: moved (those starting from a state something moved '
+          'after the last solve: contact, self-contact, an edit, a start; a free cloth takes '
+          'the fixed count unless it leaves a residual 10 times the tolerance: a steady '
+          'tick for real time) or all (every step: more accurate where a fine level is '
+          'solved, at up to twice the cost; the solver class and the benchmark default)',
           choices=TOLERANCE_STEPS),
     Param('solver.external', 'exact', 'gravity outside the filter (exact) or inside it '
           '(literal, the paper as written)', choices=('exact', 'literal')),

@@ -4,6 +4,7 @@ import glob
 import os
 
 from hcloth_ros import params
+from hcloth_ros.core import make_solver
 import numpy as np
 import pytest
 
@@ -96,13 +97,15 @@ def test_contact_strain_parameters_reach_the_solver():
 
 
 def test_newton_tolerance_steps_parameter_reaches_the_solver():
+    # the node's default is moved (a steady tick), the solver class's all
     values = params.resolve({'cloth.resolution': [5, 5], 'cloth.levels': 2})
     assert params.build_solver(params.build_model(values), values).newton_tolerance_steps \
-        == 'all'
-    values = params.resolve({'cloth.resolution': [5, 5], 'cloth.levels': 2,
-                             'solver.newton_tolerance_steps': 'moved'})
-    assert params.build_solver(params.build_model(values), values).newton_tolerance_steps \
         == 'moved'
+    values = params.resolve({'cloth.resolution': [5, 5], 'cloth.levels': 2,
+                             'solver.newton_tolerance_steps': 'all'})
+    assert params.build_solver(params.build_model(values), values).newton_tolerance_steps \
+        == 'all'
+    assert make_solver('multigrid', params.build_model(values)).newton_tolerance_steps == 'all'
     with pytest.raises(ValueError, match=r'solver\.newton_tolerance_steps'):
         params.resolve({'solver.newton_tolerance_steps': 'some'})
 

@@ -8,7 +8,8 @@ after the fixed ``newton_iterations`` (the report's ``fixed_count_residual``, in
 ``newton_tolerance`` times ``beta M g``; above 1 the step iterates on) over ``--seconds``
 of simulated time with ``newton_tolerance_steps='all'``, its median, p90 and largest, and
 the share of steps that took more iterations; then whether the same scene with
-``newton_tolerance_steps='moved'`` (a free cloth takes the fixed count) stays stable.
+``newton_tolerance_steps='moved'`` (a free cloth takes the fixed count unless its residual
+is above ``RUNAWAY`` tolerances) stays stable.
 One numba thread.
 """
 
