@@ -259,8 +259,29 @@ def assignments(pairs):
     return out
 
 
+def overrides(pairs):
+    """
+    :func:`assignments` of engine parameters, for the tools' ``-p NAME=VALUE``.
+
+    A name the table does not have is refused: :func:`resolve` leaves such names out (a
+    scene file also holds the node's own parameters), so a misspelt one would leave the
+    default in place unseen.
+    """
+    out = assignments(pairs)
+    unknown = sorted(name for name in out if name not in PARAM_BY_NAME)
+    if unknown:
+        raise ValueError(f'unknown parameters: {", ".join(unknown)} (see the README '
+                         'parameter table)')
+    return out
+
+
 def resolve(overrides=None):
-    """Defaults updated by ``overrides``; unknown names and disallowed values refused."""
+    """
+    Defaults updated by ``overrides``; disallowed values refused.
+
+    Names the table does not have are left out: the node's own parameters (rate, topics,
+    grippers) share its parameter files (see :func:`overrides` for the tools).
+    """
     values = {p.name: p.default for p in PARAMS}
     for name, value in (overrides or {}).items():
         if name not in PARAM_BY_NAME:

@@ -117,3 +117,8 @@ def test_command_line_assignments_are_yaml_values():
     for bad in ('solver.dt', '=1'):
         with pytest.raises(ValueError, match='expected NAME=VALUE'):
             params.assignments([bad])
+    # the tools' -p: engine parameters only (resolve leaves other names out)
+    assert params.overrides(['solver.dt=0.01']) == {'solver.dt': 0.01}
+    assert 'solver.extra_cg_iterations' not in params.resolve({'solver.extra_cg_iterations': 2})
+    with pytest.raises(ValueError, match='unknown parameters: solver.extra_cg_iterations'):
+        params.overrides(['solver.extra_cg_iterations=2'])

@@ -113,7 +113,7 @@ def main(argv=None):
     parser.add_argument('--restore', type=int, help='bring it back at this tick')
     args = parser.parse_args(argv)
     fold_client.LIFT, fold_client.SHORT = args.lift, args.stop_short
-    overrides = params.assignments(args.param)
+    overrides = params.overrides(args.param)
     for seed in range(args.seed, args.seed + args.runs):
         start = time.perf_counter()
         before, after = run(seed, not args.translate_only, overrides, args.shed, args.restore)

@@ -33,7 +33,7 @@ def main(argv=None):
     from hcloth_ros.core.recovery import step_with_retries
     numba.set_num_threads(args.threads)
     limit_openblas_threads(1)      # as the node does
-    values = params.resolve(params.assignments(args.param))
+    values = params.resolve(params.overrides(args.param))
     warm_up(solvers=[values['solver.name']], parallel=args.threads > 1, energy=False)
     model, solver, state, control = params.build_all(values)
     if hasattr(solver, 'set_finest_level'):

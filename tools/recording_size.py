@@ -200,7 +200,7 @@ def main(argv=None):
     with tempfile.TemporaryDirectory() as tmp:
         path = os.path.join(tmp, 'run.rrd')
         pace = 0.0 if args.no_pace else _node_default('real_time_factor')
-        ticks = record(path, args.seconds, params.assignments(args.param), options,
+        ticks = record(path, args.seconds, params.overrides(args.param), options,
                        lod_level, pace)
         if args.keep:
             shutil.copyfile(path, args.keep)
