@@ -284,7 +284,7 @@ def test_the_crossing_prefilter_keeps_every_sign_change():
         at = x0[:, :, None] + (x1 - x0)[:, :, None] * t
         a, b, c, p = at[:, 0], at[:, 1], at[:, 3], at[:, 2]
         side = np.einsum('dt,dt->t', np.cross(b - a, c - a, axis=0), p - a)
-        may = _may_cross(x0, x1, 2, 0, 2)
+        may = _may_cross(x0, x1, 2, 0, 1, 3)
         if side.min() < 0.0 < side.max():
             changed += 1
             assert may, case

@@ -11,7 +11,8 @@ moved and whether it kept the patch boxes of the call before. Last, the median o
 step's kernel time over all steps and over the steps from 20 on, once the layers rest
 on each other (where a step makes two calls: the step's own, and the one after the
 ground's rounds of strain limiting and contact), and the mean, 90th percentile and largest
-(the steps where the settling layers slide into each other again). ``--contact-strain``
+(the steps where the settling layers slide into each other again), and the median of the
+time a step spends in the calls after its first. ``--contact-strain``
 picks the contact rounds' strain limiting (the solver's ``contact_strain``, default its
 own).
 """
@@ -64,9 +65,12 @@ def main(argv=None):
                 f'{1e3 * t:.2f} ms, {pairs} pairs, {moved} moved, boxes kept {kept}'
                 for t, pairs, moved, kept in calls[-1]), flush=True)
     totals = [1e3 * sum(c[0] for c in step) for step in calls]
+    later = [1e3 * sum(c[0] for c in step[1:]) for step in calls]
     print(f'kernel a step: median {np.median(totals):.2f} ms over all {len(totals)} steps, '
           f'{np.median(totals[20:]):.2f} ms from step 21 on; mean {np.mean(totals):.2f} ms, '
-          f'90th percentile {np.percentile(totals, 90):.2f} ms, largest {max(totals):.2f} ms')
+          f'90th percentile {np.percentile(totals, 90):.2f} ms, largest {max(totals):.2f} ms; '
+          f"the calls after a step's first: median {np.median(later):.2f} ms a step, "
+          f'{np.mean([len(step) for step in calls]):.2f} calls a step')
 
 
 if __name__ == '__main__':
