@@ -118,6 +118,10 @@ PARAMS = [
           "springs across a table edge and round a finger) or jacobi (the levels' own, "
           'cheaper where nothing presses: about 0.75x the step on the 129 x 129 table '
           'drop, see README)', choices=CONTACT_STRAIN),
+    Param('solver.contact_relaxation', 1.5, 'tangent contact strain limiting moves a spring '
+          'free to move along itself this many times its correction (over-relaxation; 1: '
+          'plain Gauss-Seidel, about 1.8x the step on the 129 x 129 table drop, see README)',
+          1.0, 1.95),
     Param('self_contact.thickness', 0.0, 'self-contact: finest points stay this far from '
           "the cloth's own triangles and never cross one (m); 0 switches it off", 0.0, 0.1),
     Param('self_contact.friction', 0.3, 'self-contact: friction coefficient between layers',
@@ -358,7 +362,8 @@ def build_solver(model, values):
     return make_solver(name, model, external=values['solver.external'], strain_limit=limit,
                        contact_rounds=int(values['solver.contact_rounds']),
                        contact_sweeps=int(values['solver.contact_sweeps']) or None,
-                       contact_strain=values['solver.contact_strain'], **options)
+                       contact_strain=values['solver.contact_strain'],
+                       contact_relaxation=float(values['solver.contact_relaxation']), **options)
 
 
 def build_all(values):

@@ -134,7 +134,7 @@ def test_the_tangent_strain_limiting_keeps_a_spring_across_an_edge_on_its_faces(
     hold = np.zeros((1, 2), dtype=np.int8)
     sweeps = contact_strain.tangent_strain_limit(
         q, qd, dv, rest, hold, scene.planes, scene.boxes, scene.spheres, bodies, margin,
-        scene.friction, 0.1, 100, 0.005, DT)
+        scene.friction, 0.1, 100, 0.005, DT, 1.0)
     assert 1 <= sweeps < 100
     length = np.linalg.norm(q[:, 0, 1] - q[:, 0, 0])
     assert 0.012 * (1.0 - 1e-9) <= length <= 0.012 * 1.005
@@ -142,13 +142,15 @@ def test_the_tangent_strain_limiting_keeps_a_spring_across_an_edge_on_its_faces(
     assert local[0, 2] == pytest.approx(top, abs=1e-12)     # still on the top
     assert local[1, 0] == pytest.approx(side, abs=1e-12)    # still on the side face
     assert np.allclose(qd * DT, q - start, atol=1e-15)
-    # in the air the two ends move along the spring, half the excess each
-    free = np.array([[[0.0, 0.02]], [[0.0, 0.0]], [[1.0, 1.0]]])
-    contact_strain.tangent_strain_limit(free, np.zeros_like(free), np.zeros_like(free),
-                                        rest, hold, scene.planes, scene.boxes,
-                                        scene.spheres, bodies, margin, scene.friction, 0.1,
-                                        1, 0.005, DT)
-    assert free[0, 0, 0] == pytest.approx(0.004) and free[0, 0, 1] == pytest.approx(0.016)
+    # in the air the two ends move along the spring, half the excess each (times the
+    # relaxation: over-relaxed, the spring is left shorter than its limit)
+    for relaxation, left, right in ((1.0, 0.004, 0.016), (1.5, 0.006, 0.014)):
+        free = np.array([[[0.0, 0.02]], [[0.0, 0.0]], [[1.0, 1.0]]])
+        contact_strain.tangent_strain_limit(
+            free, np.zeros_like(free), np.zeros_like(free), rest, hold, scene.planes,
+            scene.boxes, scene.spheres, bodies, margin, scene.friction, 0.1, 1, 0.005, DT,
+            relaxation)
+        assert free[0, 0, 0] == pytest.approx(left) and free[0, 0, 1] == pytest.approx(right)
 
 
 @pytest.mark.parametrize('strain', ['jacobi', 'tangent'])
@@ -186,6 +188,13 @@ def test_an_unknown_contact_strain_is_refused():
     model = ClothBuilder(resolution=(5, 5), level_count=2).finalize()
     with pytest.raises(ValueError, match="contact_strain must be one of .*'gauss'"):
         make_solver('multigrid', model, contact_strain='gauss')
+
+
+@pytest.mark.parametrize('relaxation', [0.9, 2.0, float('nan')])
+def test_a_contact_relaxation_outside_one_to_two_is_refused(relaxation):
+    model = ClothBuilder(resolution=(5, 5), level_count=2).finalize()
+    with pytest.raises(ValueError, match=r'contact_relaxation must be in \[1, 2\)'):
+        make_solver('multigrid', model, contact_relaxation=relaxation)
 
 
 @pytest.mark.parametrize('solver', ['multigrid', 'hierarchical'])

@@ -82,7 +82,11 @@ def test_self_contact_parameters_reach_the_solver():
 def test_contact_strain_parameters_reach_the_solver():
     values = params.resolve({'cloth.resolution': [5, 5], 'cloth.levels': 2})
     solver = params.build_solver(params.build_model(values), values)
-    assert (solver.contact_strain, solver.contact_sweeps) == ('tangent', 300)
+    assert (solver.contact_strain, solver.contact_sweeps, solver.contact_relaxation) == \
+        ('tangent', 300, 1.5)
+    values = params.resolve({'cloth.resolution': [5, 5], 'cloth.levels': 2,
+                             'solver.contact_relaxation': 1.0})
+    assert params.build_solver(params.build_model(values), values).contact_relaxation == 1.0
     values = params.resolve({'cloth.resolution': [5, 5], 'cloth.levels': 2,
                              'solver.contact_strain': 'jacobi'})
     solver = params.build_solver(params.build_model(values), values)
@@ -91,7 +95,8 @@ def test_contact_strain_parameters_reach_the_solver():
                              'solver.contact_strain': 'jacobi', 'solver.contact_sweeps': 100})
     solver = params.build_solver(params.build_model(values), values)
     assert (solver.contact_strain, solver.contact_sweeps) == ('jacobi', 100)
-    for name, value in (('solver.contact_strain', 'gauss'), ('solver.contact_sweeps', -1)):
+    for name, value in (('solver.contact_strain', 'gauss'), ('solver.contact_sweeps', -1),
+                        ('solver.contact_relaxation', 2.0)):
         with pytest.raises(ValueError, match=name.replace('.', r'\.')):
             params.resolve({name: value})
 

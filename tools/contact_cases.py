@@ -6,6 +6,9 @@ The contact cases the README's limits quote, each printed as a few figures.
     .venv/bin/python tools/contact_cases.py finger [--solver multigrid]
     .venv/bin/python tools/contact_cases.py far [--solver multigrid] [--jump 2.83]
 
+(``--option NAME=VALUE``, repeatable: a solver option for the first three, e.g.
+``contact_relaxation=1.8``.)
+
 ``inside``: a 1 m cloth started across a box (169 of its 1089 finest points inside): when
 the last point leaves, and the largest strain over the first and the second second.
 ``ball``: a 0.1 m ball rising at 1 m/s under a falling 1 m cloth: the largest strain and
@@ -23,6 +26,7 @@ import time
 from hcloth_ros.bench.self_contact import ALONG_Y     # the capsule's axis on y
 from hcloth_ros.core import ClothBuilder, Control, make_scene, make_solver, Placement, State
 from hcloth_ros.core.recovery import step_with_retries
+from hcloth_ros.params import assignments
 import numpy as np
 
 DT = 1 / 60
@@ -33,11 +37,11 @@ def _model(size, origin, scene=None):
                         placement=Placement(origin, (1, 0, 0), (0, 1, 0))).finalize()
 
 
-def inside(solver_name):
+def inside(solver_name, options):
     box = np.array([0.0, 0.0, 0.5, 0.2, 0.2, 0.1])
     model = _model(1.0, (-0.5, -0.5, 0.5), make_scene(ground_z=0.0, boxes=[box]))
     state, control = State.at_rest(model), Control(model)
-    solver = make_solver(solver_name, model)
+    solver = make_solver(solver_name, model, **options)
     out, strain = None, [0.0, 0.0]
     for i in range(120):
         report, _ = step_with_retries(solver, state, control, DT)
@@ -49,10 +53,10 @@ def inside(solver_name):
           f'second, {strain[1]:.2f} in the second')
 
 
-def ball(solver_name):
+def ball(solver_name, options):
     model = _model(1.0, (-0.5, -0.5, 0.4))
     state, control = State.at_rest(model), Control(model)
-    solver = make_solver(solver_name, model)
+    solver = make_solver(solver_name, model, **options)
     control.bodies.add('ball', 'sphere', [0.1], friction=0.5)
     worst, refused = 0.0, 0
     for i in range(60):
@@ -63,10 +67,10 @@ def ball(solver_name):
     print(f'{solver_name}: largest strain {worst:.2f}, {refused} of 60 steps refused')
 
 
-def finger(solver_name):
+def finger(solver_name, options):
     model = _model(0.4, (-0.2, -0.2, 0.002), make_scene(ground_z=0.0))
     state, control = State.at_rest(model), Control(model)
-    solver = make_solver(solver_name, model)
+    solver = make_solver(solver_name, model, **options)
     control.bodies.add('finger', 'capsule', [0.01, 0.03], friction=0.8)
     x, worst = 0.0, 0.0
     start = state.points(2)
@@ -103,11 +107,16 @@ def main(argv=None):
     parser.add_argument('case', choices=('inside', 'ball', 'finger', 'far'))
     parser.add_argument('--solver', default='multigrid')
     parser.add_argument('--jump', type=float, default=2.83, help='far: metres (default 2.83)')
+    parser.add_argument('--option', action='append', default=[], metavar='NAME=VALUE',
+                        help='a solver option (YAML value), repeatable')
     args = parser.parse_args(argv)
     if args.case == 'far':
+        if args.option:
+            parser.error("far takes the node's parameters, not --option")
         far(args.solver, args.jump)
     else:
-        {'inside': inside, 'ball': ball, 'finger': finger}[args.case](args.solver)
+        {'inside': inside, 'ball': ball, 'finger': finger}[args.case](
+            args.solver, assignments(args.option))
 
 
 if __name__ == '__main__':

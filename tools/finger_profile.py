@@ -1,7 +1,8 @@
 """
 Where the contact bench's finger scene spends its step: each kernel's median a step.
 
-    .venv/bin/python tools/finger_profile.py [--size 129] [--steps 60]
+    .venv/bin/python tools/finger_profile.py [--size 129] [--steps 60] \
+        [--option contact_relaxation=1.0]
 
 The scene of ``hcloth_contact_bench`` (``multigrid``, 16 contact rounds, one numba thread):
 the cloth lies on the ground and a capsule 2 mm below its surface drags it along x at 0.2
@@ -23,12 +24,16 @@ def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
     parser.add_argument('--size', type=int, default=129)
     parser.add_argument('--steps', type=int, default=60)
+    parser.add_argument('--option', action='append', default=[], metavar='NAME=VALUE',
+                        help='a solver option (YAML value), repeatable')
     args = parser.parse_args(argv)
     numba.set_num_threads(1)
     from hcloth_ros.bench import self_contact as bench
     from hcloth_ros.core import make_solver
+    from hcloth_ros.params import assignments
     model, state, control = bench.scene_setup(args.size, 'finger')
-    solver = make_solver('multigrid', model, contact_rounds=16)
+    solver = make_solver('multigrid', model,
+                         **dict(assignments(args.option), contact_rounds=16))
     bench._move_finger(control, 0)
     solver.step(state, control, 1 / 60)        # compile or load
     level_of = {(lv.rows, lv.cols): lv.index for lv in model.levels}

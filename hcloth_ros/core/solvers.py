@@ -42,6 +42,12 @@ CONTACT_STRAIN = ('tangent', 'jacobi')
 # each moves a correction one point; tangent Gauss-Seidel stops once every spring is within
 # the limit, and on the 129 x 129 table drop 100 left 0.171, 300 0.115
 CONTACT_SWEEPS = {'jacobi': 10, 'tangent': 300}
+# contact_relaxation's default: tangent strain limiting moves a spring's ends this many
+# times its correction where they are free to move along it (kernels.contact_strain): on
+# the 129 x 129 table drop 33 ms a step instead of 61, the contact bench's finger 13
+# instead of 23, the largest strain the same or lower (README "Contact"); 1.8 was faster
+# still but let a cloth started in a box and a rising ball stretch more
+TANGENT_RELAXATION = 1.5
 NO_PLANES = np.zeros((0, 4))
 NO_PLANES.setflags(write=False)     # as a scene's planes: one compiled signature
 NO_SCENE = empty_scene()            # its arrays read-only too, as a scene's
@@ -107,6 +113,9 @@ class Solver:
         ``'jacobi'`` (the level's own, :mod:`~hcloth_ros.core.kernels.strain`: a spring
         across a table's edge stays at 0.77 strain on the 129 x 129 table drop where
         tangent keeps 0.115; under the contact bench's finger 0.60 against 0.11).
+    :param contact_relaxation: tangent strain limiting moves the springs whose ends may move
+        along them this many times their correction (in [1, 2); 1: plain Gauss-Seidel;
+        :func:`~hcloth_ros.core.kernels.contact_strain.tangent_strain_limit`).
     """
 
     name = ''
@@ -115,7 +124,7 @@ class Solver:
                  strain_refine_iterations=4, strain_tolerance=0.005, blowup_strain=10.0,
                  builds=None, thickness=None, self_friction=0.3, self_contact_iterations=8,
                  self_contact_interval=1, contact_rounds=16, contact_sweeps=None,
-                 contact_strain='tangent'):
+                 contact_strain='tangent', contact_relaxation=TANGENT_RELAXATION):
         if external not in EXTERNAL_MODES:
             raise ValueError(f'external must be one of {EXTERNAL_MODES}, got {external!r}')
         if strain_limit is not None and not (0.0 < strain_limit < 10.0):
@@ -132,6 +141,8 @@ class Solver:
                 raise ValueError(f'{name} must be in 1..10000, got {value}')
         if not (0 <= int(contact_rounds) <= 10000):
             raise ValueError(f'contact_rounds must be in 0..10000, got {contact_rounds}')
+        if not (1.0 <= contact_relaxation < 2.0):
+            raise ValueError(f'contact_relaxation must be in [1, 2), got {contact_relaxation}')
         if not (0.0 < strain_tolerance < 1.0):
             raise ValueError(f'strain_tolerance must be in (0, 1), got {strain_tolerance}')
         if not (blowup_strain > 0):
@@ -152,6 +163,7 @@ class Solver:
         self.strain_refine_iterations = int(strain_refine_iterations)
         self.strain_tolerance = float(strain_tolerance)
         self.contact_rounds = int(contact_rounds)
+        self.contact_relaxation = float(contact_relaxation)
         self.contact_sweeps = int(contact_sweeps)
         self.contact_strain = contact_strain
         self.blowup_strain = float(blowup_strain)
@@ -321,7 +333,7 @@ class Solver:
         return self.kernels(k).tangent_strain_limit(
             self._q[k], self._qd[k], self._dv[k], lv.rest, holds.kind, scene.planes,
             scene.boxes, scene.spheres, self._bodies, scene.margin, scene.friction, limit,
-            self.contact_sweeps, self.strain_tolerance, h)
+            self.contact_sweeps, self.strain_tolerance, h, self.contact_relaxation)
 
     def _pbd_velocity(self, k, state, integrated, h):
         """
