@@ -115,9 +115,9 @@ PARAMS = [
     Param('solver.contact_strain', 'tangent', "contact rounds' strain limiting: tangent "
           '(Gauss-Seidel, points lying on an obstacle or a moving body move along its '
           'surface, points a body presses into the ground stay where it holds them: holds '
-          "springs across a table edge and round a finger) or jacobi (the levels' own, "
-          'cheaper where nothing presses: about 0.75x the step on the 129 x 129 table '
-          'drop, see README)', choices=CONTACT_STRAIN),
+          "springs across a table edge and round a finger) or jacobi (the levels' own: on "
+          'the 129 x 129 table drop 0.77 strain at 1.4x the step, see README)',
+          choices=CONTACT_STRAIN),
     Param('solver.contact_relaxation', 1.5, 'tangent contact strain limiting moves a spring '
           'free to move along itself this many times its correction (over-relaxation; 1: '
           'plain Gauss-Seidel, about 1.8x the step on the 129 x 129 table drop, see README)',
