@@ -213,7 +213,7 @@ def _plane_at(x0, x1, p, i, j, k, tau, shift):
 @numba.njit(**JIT)
 def _crossing(x0, x1, p, i, j, k, ta, tb, sda, na, sdb, nb, shift, thickness):
     """
-    Twice the side (+-2) p came from if it crossed triangle t between ``ta`` and ``tb``.
+    Twice the side (+-2) p came from if it crossed triangle (i, j, k) between ``ta`` and ``tb``.
 
     ``sda``, ``na`` and ``sdb``, ``nb``: p's distance to the triangle's plane and its
     normal at ``ta`` and ``tb`` (:func:`_plane_at`; each sub-interval's end is the next
@@ -252,7 +252,7 @@ def _crossing(x0, x1, p, i, j, k, ta, tb, sda, na, sdb, nb, shift, thickness):
 @numba.njit(**JIT)
 def _near(x1, p, i, j, k, thickness):
     """
-    Side (+-1) if p ends nearer than ``thickness`` to triangle t, else 0.
+    Side (+-1) if p ends nearer than ``thickness`` to triangle (i, j, k), else 0.
 
     The distance is to the triangle's closest point (inside, on an edge or a vertex). The
     side is the one of the plane p is on at the end: a point that crossed the triangle
@@ -429,7 +429,7 @@ def _path_box(x0, x1, p, shift, reach, out):
 @numba.njit(**JIT)
 def _pair_side(x0, x1, p, i, j, k, thickness, substeps, shift):
     """
-    Return whether p and t make a pair: p's side if it crossed t (+-2) or ends near (+-1).
+    Whether p and triangle (i, j, k) make a pair: its side if it crossed (+-2) or ends near (+-1).
 
     Every sub-interval is tested, also when p ends on the side it started on: skipping
     those (a point that went through and back) doubled the folded 129 x 129 drop's
