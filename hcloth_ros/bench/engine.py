@@ -124,70 +124,81 @@ def run_config(size, solver_name, steps, warmup, budget, options=None, label=Non
     return result
 
 
-def breakdown(size, steps, warmup, solver_name='hierarchical', options=None):
+def timed_steps(model, step, steps, names):
     """
-    Time every kernel call of one solver's step (per kernel and level).
+    Call ``step()`` ``steps`` times with the named kernels timed; return what each step ran.
 
     The solver's calls go through the kernel sets ``kernels.SERIAL`` and
-    ``kernels.PARALLEL``, whose attributes are wrapped here with a timer for the
-    duration of the measurement; the level of a call
-    is told from the shape of its array arguments. Each figure is the median over steps
-    of the time per step (all calls of that kernel on that level within the step),
-    including numba's dispatch overhead. ``python_overhead`` is the step time not spent
-    in any kernel.
+    ``kernels.PARALLEL``, whose attributes are wrapped with a timer while this runs; a
+    call's level is the finest of ``model``'s levels among its array arguments (prolong and
+    eq7_level also take the coarser level's arrays). Returns ``(timed, totals)``:
+    ``timed[i]`` maps ``(kernel, level)`` to ``(seconds, calls, results)`` of step i (the
+    kernels it called), ``totals[i]`` is the step's wall time (s). The times include numba's
+    dispatch overhead.
     """
-    from hcloth_ros.core import kernels, make_solver
-    model, state, control = _scene(size)
-    solver = make_solver(solver_name, model, **(options or {}))
-    for _ in range(warmup):
-        solver.step(state, control, DT)
+    from hcloth_ros.core import kernels
     level_of = {(lv.rows, lv.cols): lv.index for lv in model.levels}
-    names = ['prescribe', 'eq6_first_sweep', 'eq6_second_sweep', 'prolong', 'eq7_level',
-             'strain_limit', 'contact', 'strain_stats', 'anchor', 'start_velocity',
-             'newton_residual', 'assemble_hierarchy', 'multigrid_cg', 'new_positions',
-             'inject']
     kits = (kernels.SERIAL, kernels.PARALLEL)
     originals = {(i, n): getattr(kit, n) for i, kit in enumerate(kits) for n in names}
-    current = defaultdict(float)
-    sweep_now = {}
+    current = {}
 
     def wrap(name, fn):
         def timed(*args):
-            # the finest level among the array arguments (prolong and eq7_level also
-            # take the coarser level's arrays)
             level = max((level_of.get(a.shape[-2:], -1) for a in args
                          if isinstance(a, np.ndarray) and a.ndim >= 2), default=-1)
             t0 = time.perf_counter()
             out = fn(*args)
-            current[(name, level)] += time.perf_counter() - t0
-            if name == 'strain_limit':
-                sweep_now[level] = out
+            entry = current.setdefault((name, level), [0.0, 0, []])
+            entry[0] += time.perf_counter() - t0
+            entry[1] += 1
+            entry[2].append(out)
             return out
         return timed
 
-    per_step = defaultdict(list)
-    sweeps = defaultdict(list)
-    totals = []
+    timed, totals = [], []
     try:
         for n in names:
             for i, kit in enumerate(kits):
                 setattr(kit, n, wrap(n, originals[i, n]))
         for _ in range(steps):
-            current.clear()
-            sweep_now.clear()
+            current = {}
             t0 = time.perf_counter()
-            solver.step(state, control, DT)
+            step()
             totals.append(time.perf_counter() - t0)
-            for key, value in current.items():
-                per_step[key].append(value)
-            for k, v in sweep_now.items():
-                sweeps[k].append(v)
-            kernel_sum = sum(current.values())
-            per_step[('python_overhead', -1)].append(totals[-1] - kernel_sum)
+            timed.append(current)
     finally:
         for n in names:
             for i, kit in enumerate(kits):
                 setattr(kit, n, originals[i, n])
+    return timed, totals
+
+
+def breakdown(size, steps, warmup, solver_name='hierarchical', options=None):
+    """
+    Time every kernel call of one solver's step (per kernel and level).
+
+    Timed by :func:`timed_steps`. Each figure is the median over the steps that called a
+    kernel on a level of its time in that step (all its calls there), including numba's
+    dispatch overhead. ``python_overhead`` is the step time not spent in any kernel.
+    """
+    from hcloth_ros.core import make_solver
+    model, state, control = _scene(size)
+    solver = make_solver(solver_name, model, **(options or {}))
+    for _ in range(warmup):
+        solver.step(state, control, DT)
+    names = ['prescribe', 'eq6_first_sweep', 'eq6_second_sweep', 'prolong', 'eq7_level',
+             'strain_limit', 'contact', 'strain_stats', 'anchor', 'start_velocity',
+             'newton_residual', 'assemble_hierarchy', 'multigrid_cg', 'new_positions',
+             'inject']
+    timed, totals = timed_steps(model, lambda: solver.step(state, control, DT), steps, names)
+    per_step, sweeps = defaultdict(list), defaultdict(list)
+    for current, total in zip(timed, totals):
+        for (name, k), (seconds, _, results) in current.items():
+            per_step[name, k].append(seconds)
+            if name == 'strain_limit':
+                sweeps[k].append(results[-1])
+        kernel_sum = sum(seconds for seconds, _, _ in current.values())
+        per_step[('python_overhead', -1)].append(total - kernel_sum)
     rows = []
     for (name, k), values in sorted(per_step.items(), key=lambda kv: (kv[0][1], kv[0][0])):
         entry = {'kernel': name, 'level': k, 'median_ms': float(np.median(values) * 1e3),

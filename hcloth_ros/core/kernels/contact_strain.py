@@ -172,6 +172,22 @@ def _held(q, r, c, bodies, planes, plane_friction, margin):
 
 
 @numba.njit(**JIT)
+def _held_once(q, r, c, held, bodies, planes, plane_friction, margin):
+    """
+    :func:`_held` of point (r, c), decided the first time a call asks (``held``: 0 not yet).
+
+    Asked at every spring end over its limit, the check (a body's frame and depth) took 37 %
+    of the contact bench's finger scene's sweeps; made for every point at the start of a
+    call it would cost a pass over the level where no spring is over. A held point does not
+    move in the sweeps, so it stays held; a free one that slides under the body afterwards
+    is moved as free, and the body's contact, which runs after strain limiting, holds it.
+    """
+    if held[r, c] == 0:
+        held[r, c] = 1 if _held(q, r, c, bodies, planes, plane_friction, margin) else 2
+    return held[r, c] == 1
+
+
+@numba.njit(**JIT)
 def _shift(q, qd, dv, r, c, lam, mx, my, mz, h):
     """Move point (r, c) by ``lam`` times (mx, my, mz); its velocities follow."""
     for d, m in ((0, mx), (1, my), (2, mz)):
@@ -234,18 +250,10 @@ def tangent_strain_limit(q, qd, dv, rest, hold_kind, planes, boxes, spheres, bod
     now = np.ones((rows, runs), dtype=np.bool_)     # runs a sweep looks at
     later = np.zeros((rows, runs), dtype=np.bool_)  # runs the next sweep looks at
     corrected = 0
-    # a body can press a point into a plane (see _held). Which points it holds is found
-    # once a call, not at every correction (the check, a body's frame and depth, took
-    # 37 % of the finger scene's sweeps): a held point does not move here, so it stays
-    # held; a free point slid under the body during the sweeps is moved as a free one,
-    # and the body's contact, which runs next, holds it
+    # a body can press a point into a plane (see _held): decided once a call for each
+    # point a spring over its limit asks about (:func:`_held_once`)
     pressing = bodies.shape[0] > 0 and planes.shape[0] > 0
-    held = np.zeros((rows, cols), dtype=np.bool_)
-    if pressing:
-        for r in range(rows):
-            for c in range(cols):
-                if hold_kind[r, c] == FREE:
-                    held[r, c] = _held(q, r, c, bodies, planes, plane_friction, margin)
+    held = np.zeros((rows, cols), dtype=np.int8)
     for _ in range(max_sweeps):
         over = False
         for r in range(rows):
@@ -267,9 +275,11 @@ def tangent_strain_limit(q, qd, dv, rest, hold_kind, planes, boxes, spheres, bod
                         continue
                     over = True
                     if pressing:
-                        if held[r, c]:
+                        if wp > 0.0 and _held_once(q, r, c, held, bodies, planes,
+                                                   plane_friction, margin):
                             wp = 0.0
-                        if held[r2, c2]:
+                        if wn > 0.0 and _held_once(q, r2, c2, held, bodies, planes,
+                                                   plane_friction, margin):
                             wn = 0.0
                         if wp + wn == 0.0:
                             continue
