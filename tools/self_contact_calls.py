@@ -11,8 +11,10 @@ moved and whether it kept the patch boxes of the call before. Last, the median o
 step's kernel time over all steps and over the steps from 20 on, once the layers rest
 on each other (where a step makes two calls: the step's own, and the one after the
 ground's rounds of strain limiting and contact), and the mean, 90th percentile and largest
-(the steps where the settling layers slide into each other again), and the median of the
-time a step spends in the calls after its first. ``--contact-strain``
+(the steps where the top layer slides over the bottom one), and the median of the
+time a step spends in the calls after its first; then where the middle column's edges
+are (the cloth starts folded, its far edge over its near one, and opens: its bending
+springs rest flat). ``--contact-strain``
 picks the contact rounds' strain limiting (the solver's ``contact_strain``, default its
 own).
 """
@@ -71,6 +73,12 @@ def main(argv=None):
           f'90th percentile {np.percentile(totals, 90):.2f} ms, largest {max(totals):.2f} ms; '
           f"the calls after a step's first: median {np.median(later):.2f} ms a step, "
           f'{np.mean([len(step) for step in calls]):.2f} calls a step')
+    # whether the cloth is still folded: the fold starts with its far edge over its near one
+    q, ground = state.q[finest], model.scene.planes[0, 3]
+    middle = q[:, :, q.shape[2] // 2]
+    print(f'at the end, along the middle column: near edge y {middle[1, 0]:.3f} m, far edge '
+          f'y {middle[1, -1]:.3f} m, highest point {middle[2].max() - ground:.3f} m above '
+          'the ground')
 
 
 if __name__ == '__main__':

@@ -7,7 +7,7 @@ This module decides which level, between which positions, and what the coarser l
 afterwards.
 """
 
-from hcloth_ros.core.kernels.self_contact import patch_cache
+from hcloth_ros.core.kernels.self_contact import obstacle_supports, patch_cache
 import numpy as np
 
 # Rounds of self-contact and strain limiting a check runs at most (see SelfContact.apply).
@@ -27,24 +27,11 @@ def supports(scene, q, out):
     the nearer counts (the scenes have one plane, the ground). Strain limiting between
     self-contact's rounds does not look at supports.
     """
-    out[:3] = 0.0
-    out[3] = np.inf
     if scene is None or scene.empty:
+        out[:3] = 0.0
+        out[3] = np.inf
         return out
-    for plane in scene.planes:
-        room = np.maximum(np.einsum('d,drc->rc', plane[:3], q) - plane[3] - scene.margin, 0.0)
-        nearer = room < out[3]
-        out[:3, nearer] = plane[:3, None]
-        out[3, nearer] = room[nearer]
-    for box in scene.boxes:
-        height = q[2] - (box[2] + box[5])
-        over = (np.abs(q[0] - box[0]) < box[3] + scene.margin) & \
-            (np.abs(q[1] - box[1]) < box[4] + scene.margin) & (height >= -scene.margin)
-        room = np.maximum(height - scene.margin, 0.0)
-        nearer = over & (room < out[3])
-        out[:2, nearer] = 0.0
-        out[2, nearer] = 1.0
-        out[3, nearer] = room[nearer]
+    obstacle_supports(scene.planes, scene.boxes, scene.margin, q, out)
     return out
 
 
@@ -79,7 +66,7 @@ class SelfContact:
         self._key = None            # (level, time) the next step must start from
         self._steps = 0             # steps since the last check
         self._moved = self._before = self._support = None   # buffers of apply
-        self._patches = None        # the kernel's patch boxes, kept between a step's calls
+        self._patches = None        # what the kernel keeps between a step's calls
 
     def _due(self, k, state):
         """
@@ -127,7 +114,6 @@ class SelfContact:
         span = (self._steps + 1) * h    # the time the kernel's paths cover
         pairs, dropped = None, 0
         mask, before, support = self._buffers(lv.shape)
-        boxes, ends, cones, touched = self._patches
         if moved is None:
             mask[:] = True
         else:
@@ -140,7 +126,7 @@ class SelfContact:
             found, _, lost = kit.self_contact(
                 solver._q[k], solver._qd[k], solver._dv[k], start, lv.mass, holds.kind, mask,
                 support, self.thickness, self.friction, self.iterations, span,
-                max(solver.model.width, solver.model.height), boxes, ends, cones, touched,
+                max(solver.model.width, solver.model.height), *self._patches,
                 attempt > 0 or moved is not None)
             if found < 0:
                 solver._extra['self_contact_refused'] = True
