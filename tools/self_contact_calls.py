@@ -8,9 +8,10 @@ The folded cloth of ``hcloth_contact_bench`` (``multigrid``, thickness 4 mm, one
 thread) falls onto the ground; each self-contact kernel call of the finest level is timed
 and printed with the pairs its first detection found, how many points it was told had
 moved and whether it kept the patch boxes of the call before. Last, the median of a
-step's kernel time over all steps and over the steps from 20 on, once the layers rest
-on each other (where a step makes two calls: the step's own, and the one after the
-ground's rounds of strain limiting and contact), and the mean, 90th percentile and largest
+step's kernel time over all steps and over the steps from 20 on, once the layers lie on
+each other (where a step makes two calls or more: the step's own, the ones after its
+strain limiting, and the one after the ground's rounds of strain limiting and contact),
+and the mean, 90th percentile and largest
 (the steps where the top layer slides over the bottom one), and the median of the
 time a step spends in the calls after its first; then where the middle column's edges
 are (the cloth starts folded, its far edge over its near one, and opens: its bending
@@ -68,8 +69,10 @@ def main(argv=None):
                 for t, pairs, moved, kept in calls[-1]), flush=True)
     totals = [1e3 * sum(c[0] for c in step) for step in calls]
     later = [1e3 * sum(c[0] for c in step[1:]) for step in calls]
+    settled = (f'{np.median(totals[20:]):.2f} ms from step 21 on' if len(totals) > 20
+               else 'no steps from step 21 on')
     print(f'kernel a step: median {np.median(totals):.2f} ms over all {len(totals)} steps, '
-          f'{np.median(totals[20:]):.2f} ms from step 21 on; mean {np.mean(totals):.2f} ms, '
+          f'{settled}; mean {np.mean(totals):.2f} ms, '
           f'90th percentile {np.percentile(totals, 90):.2f} ms, largest {max(totals):.2f} ms; '
           f"the calls after a step's first: median {np.median(later):.2f} ms a step, "
           f'{np.mean([len(step) for step in calls]):.2f} calls a step')
