@@ -14,7 +14,7 @@ import os
 
 from hcloth_ros.core import ClothBuilder, Control, make_scene, make_solver, Placement, State
 from hcloth_ros.core.multigrid_solver import TOLERANCE_STEPS
-from hcloth_ros.core.solvers import CONTACT_STRAIN
+from hcloth_ros.core.solvers import CONTACT_STRAIN, TANGENT_RELAXATION
 import numpy as np
 import yaml
 
@@ -118,9 +118,10 @@ PARAMS = [
           "springs across a table edge and round a finger) or jacobi (the levels' own: on "
           'the 129 x 129 table drop 0.77 strain at 1.4x the step, see README)',
           choices=CONTACT_STRAIN),
-    Param('solver.contact_relaxation', 1.5, 'tangent contact strain limiting moves a spring '
-          'free to move along itself this many times its correction (over-relaxation; 1: '
-          'plain Gauss-Seidel, about 1.8x the step on the 129 x 129 table drop, see README)',
+    Param('solver.contact_relaxation', TANGENT_RELAXATION, 'tangent contact strain '
+          'limiting moves a spring free to move along itself this many times its correction '
+          '(over-relaxation; 1: plain Gauss-Seidel, about 1.8x the step on the 129 x 129 '
+          'table drop, see README)',
           1.0, 1.95),
     Param('self_contact.thickness', 0.0, 'self-contact: finest points stay this far from '
           "the cloth's own triangles and never cross one (m); 0 switches it off", 0.0, 0.1),
