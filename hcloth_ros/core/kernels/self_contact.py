@@ -25,6 +25,17 @@ whose swept boxes its path comes near, then their triangles:
 * near: at the end it is nearer than the thickness to the triangle's closest point
   (inside, on an edge or at a vertex); the pair keeps the side of the plane it is on.
 
+In the pairs of patches along the grid's border the free edges (on the border) are also
+tested against the other patch's edges (rows, columns and the cells' diagonals, outside
+the ``RING``): crossed if the four ends become coplanar in a sub-interval while the two
+segments pass within the thickness of each other at interior points of both, near if
+they end so. A point passing through a triangle is what a surface's passing through
+another's inside looks like; at the other's border it can pass with no point doing so (a
+corner hooked round another layer's edge, both layers' edges lying over each other): the
+edges are what cross there, and such tangles stretched the perturbed folded drops'
+springs to 9 times their rest length (``tools/folded_seeds.py``). Two edges crossing
+away from the border (an edge hooked over another layer's sharp crease) are not tested.
+
 Response (at the end positions; rounds of detection, each followed by ``RESOLVE_PASSES``
 Gauss-Seidel passes over its pairs, until a detection finds none, the last round moving
 points alone): the point and the triangle's vertices (weighted by the closest point's
@@ -40,7 +51,9 @@ step, and that move divided by ``h`` off their velocities. A point above an obst
 (its ``support``: the obstacle's outward normal and the room left to its margin, see
 :func:`~hcloth_ros.core.self_contact.supports`) moves towards it by at most that room,
 by a push or by friction; with no room left its weight is zero for a push into it, and
-the other side of the pair moves alone.
+the other side of the pair moves alone. An edge pair moves the two edges' closest points
+apart the same way (weights ``1 - s, s`` and ``1 - t, t``, along the edges' common normal
+to the side they came from, or the line between the closest points), without friction.
 """
 
 import math
@@ -73,6 +86,8 @@ RESOLVE_PASSES = 4
 # Pairs a step may hold per point (beyond it the rest of the step's pairs are dropped and
 # the count says so).
 PAIRS_PER_POINT = 8
+# Edge pairs a step may hold per free edge of the grid.
+EDGE_PAIRS_PER_EDGE = 32
 
 
 @numba.njit(**JIT)
@@ -219,15 +234,16 @@ def _crossing(x0, x1, p, i, j, k, ta, tb, sda, na, sdb, nb, shift, thickness):
     normal at ``ta`` and ``tb`` (:func:`_plane_at`; each sub-interval's end is the next
     one's start, computed once).
 
-    0 if it did not cross. Crossing: its distance to the triangle's plane changes sign,
-    and at the time that distance interpolates to zero it lies inside the triangle or
-    within ``thickness`` of its border. (Inside at either end instead flagged triangles
-    that turned over at a free corner, and pushed points 2.5 cm the wrong way; strictly
-    inside missed a point passing a free edge that lies exactly over another layer's
-    edge, and tangled the two edges.)
+    0 if it did not cross. Crossing: its distance to the triangle's plane changes sign (or
+    reaches zero at ``tb``: a point on the plane at a sub-interval's boundary was missed by
+    both sub-intervals), and at the time that distance interpolates to zero it lies inside
+    the triangle or within ``thickness`` of its border. (Inside at either end instead
+    flagged triangles that turned over at a free corner, and pushed points 2.5 cm the wrong
+    way; strictly inside missed a point passing a free edge that lies exactly over another
+    layer's edge, and tangled the two edges.)
     """
-    if not sda * sdb < 0.0:
-        return 0.0
+    if not (sda != 0.0 and sda * sdb <= 0.0):
+        return 0.0      # (on the plane at ``tb``: this sub-interval's crossing)
     if not na[0] * nb[0] + na[1] * nb[1] + na[2] * nb[2] > 0.0:
         return 0.0      # the triangle turned over: its plane's sign says nothing
     tc = ta + (tb - ta) * sda / (sda - sdb)
@@ -654,6 +670,188 @@ def _points_against(x0, x1, rows, cols, thickness, substeps, subs, shift, ai, aj
 
 
 @numba.njit(**JIT)
+def _edge(e, cols):
+    """Flat indices of edge e's ends: ``e = 3 v + d``, d 0 along a row, 1 down, 2 diagonal."""
+    v, d = e // 3, e % 3
+    return v, v + (1, cols, cols + 1)[d]
+
+
+@numba.njit(**JIT)
+def _on_border(a, b, rows, cols):
+    """Whether the edge between grid points a and b lies on the grid's border."""
+    ra, ca, rb, cb = a // cols, a % cols, b // cols, b % cols
+    return (ra == rb and (ra == 0 or ra == rows - 1)) or \
+        (ca == cb and (ca == 0 or ca == cols - 1))
+
+
+@numba.njit(**JIT)
+def _segments(a, b, c, d):
+    """
+    Closest points of the lines through segments a-b and c-d: ``(s, t, ok)``.
+
+    ``a + s (b - a)`` and ``c + t (d - c)``; ``ok`` False for (nearly) parallel lines,
+    whose nearest points a vertex-triangle test finds.
+    """
+    ux, uy, uz = b[0] - a[0], b[1] - a[1], b[2] - a[2]
+    vx, vy, vz = d[0] - c[0], d[1] - c[1], d[2] - c[2]
+    wx, wy, wz = a[0] - c[0], a[1] - c[1], a[2] - c[2]
+    uu, uv, vv = ux * ux + uy * uy + uz * uz, ux * vx + uy * vy + uz * vz, \
+        vx * vx + vy * vy + vz * vz
+    uw, vw = ux * wx + uy * wy + uz * wz, vx * wx + vy * wy + vz * wz
+    denom = uu * vv - uv * uv
+    if not denom > 1e-12 * uu * vv:
+        return 0.0, 0.0, False
+    return (uv * vw - vv * uw) / denom, (uu * vw - uv * uw) / denom, True
+
+
+@numba.njit(**JIT)
+def _gap(a, b, c, d, s, t):
+    """Vector from ``c + t (d - c)`` to ``a + s (b - a)``, and its length."""
+    gx = a[0] + s * (b[0] - a[0]) - c[0] - t * (d[0] - c[0])
+    gy = a[1] + s * (b[1] - a[1]) - c[1] - t * (d[1] - c[1])
+    gz = a[2] + s * (b[2] - a[2]) - c[2] - t * (d[2] - c[2])
+    return gx, gy, gz, math.sqrt(gx * gx + gy * gy + gz * gz)
+
+
+@numba.njit(**JIT)
+def _orient(a, b, c, d):
+    """``((b - a) x (c - a)) . (d - a)``: its sign is edge a-b's side of edge c-d."""
+    return _triple(b[0] - a[0], b[1] - a[1], b[2] - a[2], c[0] - a[0], c[1] - a[1],
+                   c[2] - a[2], d[0] - a[0], d[1] - a[1], d[2] - a[2])
+
+
+@numba.njit(**JIT)
+def _edges_meet(a, b, c, d, thickness):
+    """Whether segments a-b and c-d pass within ``thickness`` at interior points of both."""
+    s, t, ok = _segments(a, b, c, d)
+    if not (ok and 0.0 < s < 1.0 and 0.0 < t < 1.0):
+        return False
+    return _gap(a, b, c, d, s, t)[3] < thickness
+
+
+@numba.njit(**JIT)
+def _edge_side(x0, x1, a, b, c, d, thickness, substeps, shift):
+    """
+    Whether edges a-b and c-d make a pair: a-b's side if it crossed c-d (+-2) or ends near (+-1).
+
+    Crossing: the four points become coplanar (the side cubic of :func:`_side_cubic`
+    changes sign in a sub-interval) while the two segments pass within ``thickness`` of
+    each other at interior points; the side is the one before. Near: at the end they are
+    nearer than ``thickness`` at interior points of both; the side is the present one.
+    The side is the sign of :func:`_orient`, that of a-b's offset from c-d along
+    ``(b - a) x (d - c)``.
+    """
+    c0, c1, c2, c3, margin = _side_cubic(x0, x1, d, a, b, c)
+    if _may_change(c0, c1, c2, c3, margin):
+        ca = c0
+        for sub in range(substeps):
+            ta, tb = sub / substeps, (sub + 1) / substeps
+            cb = c0 + tb * (c1 + tb * (c2 + tb * c3))
+            if (ca > margin and cb > margin) or (ca < -margin and cb < -margin):
+                ca = cb
+                continue
+            ca = cb
+            oa = _orient(_at(x0, x1, a, ta, shift), _at(x0, x1, b, ta, shift),
+                         _at(x0, x1, c, ta, shift), _at(x0, x1, d, ta, shift))
+            ob = _orient(_at(x0, x1, a, tb, shift), _at(x0, x1, b, tb, shift),
+                         _at(x0, x1, c, tb, shift), _at(x0, x1, d, tb, shift))
+            if not (oa != 0.0 and oa * ob <= 0.0):
+                continue    # (coplanar at ``tb``: this sub-interval's crossing)
+            tc = ta + (tb - ta) * oa / (oa - ob)
+            if _edges_meet(_at(x0, x1, a, tc, shift), _at(x0, x1, b, tc, shift),
+                           _at(x0, x1, c, tc, shift), _at(x0, x1, d, tc, shift), thickness):
+                return 2.0 if oa > 0.0 else -2.0
+    pa, pb, pc, pd = _point(x1, a), _point(x1, b), _point(x1, c), _point(x1, d)
+    if not _edges_meet(pa, pb, pc, pd, thickness):
+        return 0.0
+    return 1.0 if _orient(pa, pb, pc, pd) >= 0.0 else -1.0
+
+
+@numba.njit(**JIT)
+def _segment_box(x0, x1, a, b, shift, reach, out):
+    """Write the box edge a-b sweeps in a frame moving by ``shift``, grown by ``reach``."""
+    for d in range(3):
+        out[d] = min(x0[d, a], x0[d, b], x1[d, a] - shift[d], x1[d, b] - shift[d]) - reach
+        out[3 + d] = max(x0[d, a], x0[d, b], x1[d, a] - shift[d], x1[d, b] - shift[d]) \
+            + reach
+
+
+@numba.njit(**JIT)
+def _edge_against(x0, x1, rows, cols, thickness, substeps, subs, shift, e, bi, bj, fresh,
+                  pairs, sides, count):
+    """
+    Test free edge e against the edges of patch B; returns the new pair count.
+
+    B's edges: each cell's edge along its first row, down its first column and its
+    diagonal, and along the grid's last row and column those of its cells there. Edges
+    with an end within ``RING`` rows and columns of one of e's are skipped (the cloth's
+    own surface), and so are pairs of two free edges but once (e the lower index).
+    """
+    a, b = _edge(e, cols)
+    ra0, ra1 = min(a // cols, b // cols), max(a // cols, b // cols)
+    ca0, ca1 = min(a % cols, b % cols), max(a % cols, b % cols)
+    box, block, other = np.empty(6), np.empty(6), np.empty(6)
+    _segment_box(x0, x1, a, b, shift, thickness, box)
+    per = PATCH // SUB
+    for si in range(bi * per, min((bi + 1) * per, subs.shape[0])):
+        for sj in range(bj * per, min((bj + 1) * per, subs.shape[1])):
+            _moving_box(subs[si, sj], shift, 0.0, block)
+            if not _overlap(box, block):
+                continue
+            for u in range(si * SUB, min((si + 1) * SUB, rows - 1)):
+                for v in range(sj * SUB, min((sj + 1) * SUB, cols - 1)):
+                    i = u * cols + v
+                    for d in range(5):
+                        if d == 3 and u != rows - 2 or d == 4 and v != cols - 2:
+                            continue
+                        # the cell's last row or column edge: the grid's border
+                        f = 3 * i + d if d < 3 else \
+                            (3 * (i + cols) if d == 3 else 3 * (i + 1) + 1)
+                        c, dd = _edge(f, cols)
+                        if ra0 - RING <= max(c // cols, dd // cols) and \
+                                min(c // cols, dd // cols) <= ra1 + RING and \
+                                ca0 - RING <= max(c % cols, dd % cols) and \
+                                min(c % cols, dd % cols) <= ca1 + RING:
+                            continue
+                        if not (fresh[a] or fresh[b] or fresh[c] or fresh[dd]):
+                            continue
+                        if f < e and _on_border(c, dd, rows, cols):
+                            continue        # found as e's partner when f was tested
+                        _segment_box(x0, x1, c, dd, shift, 0.0, other)
+                        if not _overlap(box, other):
+                            continue
+                        side = _edge_side(x0, x1, a, b, c, dd, thickness, substeps, shift)
+                        if side != 0.0:
+                            if count < pairs.shape[0]:
+                                pairs[count, 0], pairs[count, 1] = e, f
+                                sides[count] = side
+                            count += 1
+    return count
+
+
+@numba.njit(**JIT)
+def _free_edges_against(x0, x1, rows, cols, thickness, substeps, subs, shift, ai, aj, bi,
+                        bj, fresh, pairs, sides, count):
+    """Test patch A's edges on the grid's border against patch B's edges (see _edge_against)."""
+    r0, r1 = ai * PATCH, min((ai + 1) * PATCH, rows - 1)
+    c0, c1 = aj * PATCH, min((aj + 1) * PATCH, cols - 1)
+    for side in range(4):
+        if side == 0 and r0 == 0 or side == 1 and r1 == rows - 1:
+            row = 0 if side == 0 else rows - 1
+            for c in range(c0, c1):
+                count = _edge_against(x0, x1, rows, cols, thickness, substeps, subs, shift,
+                                      3 * (row * cols + c), bi, bj, fresh, pairs, sides,
+                                      count)
+        if side == 2 and c0 == 0 or side == 3 and c1 == cols - 1:
+            col = 0 if side == 2 else cols - 1
+            for r in range(r0, r1):
+                count = _edge_against(x0, x1, rows, cols, thickness, substeps, subs, shift,
+                                      3 * (r * cols + col) + 1, bi, bj, fresh, pairs, sides,
+                                      count)
+    return count
+
+
+@numba.njit(**JIT)
 def _triangle_boxes(x0, x1, rows, cols, si, sj, shift, out):
     """
     Write the boxes block (si, sj)'s triangles sweep in the frame moving by ``shift``.
@@ -680,7 +878,7 @@ def _triangle_boxes(x0, x1, rows, cols, si, sj, shift, out):
 
 @numba.njit(**JIT)
 def _detect(x0, x1, rows, cols, thickness, substeps, dirty, fresh, fresh_blocks, pairs,
-            sides, boxes, ends, cones, subs, ready):
+            sides, edge_pairs, edge_sides, boxes, ends, cones, subs, ready):
     """
     Collect (point, triangle) pairs and their sides over the step.
 
@@ -695,8 +893,12 @@ def _detect(x0, x1, rows, cols, thickness, substeps, dirty, fresh, fresh_blocks,
     :func:`_fresh_blocks`). ``subs`` holds the blocks' boxes (:func:`_block_boxes`) of
     the patches marked in ``ready``; the others' are computed when a patch first meets
     another one and marked: a step's later calls keep those of the patches where nothing
-    moved. Returns how many pairs were found (those beyond the arrays' capacity are not
-    kept).
+    moved. In the pairs of patches along the grid's border, the free edges are tested
+    against the other patch's edges (``edge_pairs``, ``edge_sides``:
+    :func:`_edge_side`): a free edge can pass through another layer where no point
+    passes through a triangle (a layer's corner hooked round another's edge). Returns
+    how many point-triangle and edge pairs were found (those beyond the arrays' capacity
+    are not kept).
     """
     pr, pc = boxes.shape[0], boxes.shape[1]
     box_a, box_b, shift = np.empty(6), np.empty(6), np.empty(3)
@@ -712,7 +914,7 @@ def _detect(x0, x1, rows, cols, thickness, substeps, dirty, fresh, fresh_blocks,
     for a in range(pr * pc):
         lows[a] = boxes[a // pc, a % pc, 0]
     order = np.argsort(lows)
-    count = 0
+    count = edge_count = 0
     for m in range(pr * pc):
         a = order[m]
         ai, aj = a // pc, a % pc
@@ -744,7 +946,14 @@ def _detect(x0, x1, rows, cols, thickness, substeps, dirty, fresh, fresh_blocks,
                                         bi, bj, ai, aj, fresh, fresh_blocks, pairs, sides,
                                         count, b_boxes, near, counts, tri_boxes,
                                         tri_ready)
-    return count
+            for patch_i, patch_j, other_i, other_j in ((ai, aj, bi, bj), (bi, bj, ai, aj)):
+                if patch_i == 0 or patch_i == pr - 1 or patch_j == 0 or patch_j == pc - 1:
+                    edge_count = _free_edges_against(
+                        x0, x1, rows, cols, thickness, substeps, subs, shift, patch_i,
+                        patch_j, other_i, other_j, fresh, edge_pairs, edge_sides, edge_count)
+                if a == b:
+                    break
+    return count, edge_count
 
 
 @numba.njit(**JIT)
@@ -974,6 +1183,102 @@ def _resolve(x0, x1, qd, dv, inv_mass, support, cols, p, t, side, thickness, fri
 
 
 @numba.njit(**JIT)
+def _clamped_segments(a, b, c, d):
+    """Closest points ``(s, t)`` of segments a-b and c-d (the lines' clamped into both)."""
+    s, t, ok = _segments(a, b, c, d)
+    if not ok:
+        return 0.5, 0.5
+    s = min(1.0, max(0.0, s))
+    # t for that s, then s for that t
+    vx, vy, vz = d[0] - c[0], d[1] - c[1], d[2] - c[2]
+    vv = vx * vx + vy * vy + vz * vz
+    px = a[0] + s * (b[0] - a[0]) - c[0]
+    py = a[1] + s * (b[1] - a[1]) - c[1]
+    pz = a[2] + s * (b[2] - a[2]) - c[2]
+    t = min(1.0, max(0.0, (px * vx + py * vy + pz * vz) / vv)) if vv > 0.0 else 0.0
+    ux, uy, uz = b[0] - a[0], b[1] - a[1], b[2] - a[2]
+    uu = ux * ux + uy * uy + uz * uz
+    qx = c[0] + t * vx - a[0]
+    qy = c[1] + t * vy - a[1]
+    qz = c[2] + t * vz - a[2]
+    s = min(1.0, max(0.0, (qx * ux + qy * uy + qz * uz) / uu)) if uu > 0.0 else 0.0
+    return s, t
+
+
+@numba.njit(**JIT)
+def _resolve_edges(x0, x1, qd, dv, inv_mass, support, cols, e, f, side, thickness, one_side):
+    """
+    Push edge e (a free edge) and edge f apart; returns whether they were too close.
+
+    As :func:`_resolve` for a point and a triangle, between the edges' closest points
+    (weights ``1 - s, s`` and ``1 - t, t``): a crossed pair along the normal of both
+    edges to the side e came from, a near one along the line between the closest points.
+    Inelastic, no friction (a layer slides over a free edge on the points near it).
+    """
+    a, b = _edge(e, cols)
+    c, d = _edge(f, cols)
+    pa, pb, pc, pd = _point(x1, a), _point(x1, b), _point(x1, c), _point(x1, d)
+    s, t = _clamped_segments(pa, pb, pc, pd)
+    gx, gy, gz, dist = _gap(pa, pb, pc, pd, s, t)
+    if abs(side) > 1.5:
+        ux, uy, uz = pb[0] - pa[0], pb[1] - pa[1], pb[2] - pa[2]
+        vx, vy, vz = pd[0] - pc[0], pd[1] - pc[1], pd[2] - pc[2]
+        nx, ny, nz = uy * vz - uz * vy, uz * vx - ux * vz, ux * vy - uy * vx
+        norm = math.sqrt(nx * nx + ny * ny + nz * nz)
+        if not norm > 0.0:
+            return False
+        sign = 1.0 if side > 0.0 else -1.0
+        nx, ny, nz = sign * nx / norm, sign * ny / norm, sign * nz / norm
+        gap = gx * nx + gy * ny + gz * nz - thickness
+    else:
+        if not dist > 0.0:
+            return False
+        nx, ny, nz = gx / dist, gy / dist, gz / dist
+        gap = dist - thickness
+    if not gap < 0.0:
+        return False
+    # the closest points' motion over the step: a pair this deep was not made by it
+    rx = ry = rz = 0.0
+    for idx, wt in ((a, 1.0 - s), (b, s), (c, t - 1.0), (d, -t)):
+        rx += wt * (x1[0, idx] - x0[0, idx])
+        ry += wt * (x1[1, idx] - x0[1, idx])
+        rz += wt * (x1[2, idx] - x0[2, idx])
+    if -gap > 2.0 * thickness + math.sqrt(rx * rx + ry * ry + rz * rz):
+        return False
+    ia, ib, ic, id_ = inv_mass[a], inv_mass[b], inv_mass[c], inv_mass[d]
+    ia = 0.0 if _blocked(support, a, nx, ny, nz) else ia
+    ib = 0.0 if _blocked(support, b, nx, ny, nz) else ib
+    ic = 0.0 if _blocked(support, c, -nx, -ny, -nz) else ic
+    id_ = 0.0 if _blocked(support, d, -nx, -ny, -nz) else id_
+    if one_side:
+        if ia + ib > 0.0:
+            ic, id_ = 0.0, 0.0
+        else:
+            ia, ib = 0.0, 0.0
+    wa, wb, wc, wd = 1.0 - s, s, 1.0 - t, t
+    denom = max(wa * wa * ia + wb * wb * ib + wc * wc * ic + wd * wd * id_, wa * ia,
+                wb * ib, wc * ic, wd * id_)
+    if not denom > 0.0:
+        return False
+    lam = -gap / denom
+    _shift(x1, a, _room(support, a, lam * ia * wa, nx, ny, nz), nx, ny, nz)
+    _shift(x1, b, _room(support, b, lam * ib * wb, nx, ny, nz), nx, ny, nz)
+    _shift(x1, c, _room(support, c, -lam * ic * wc, nx, ny, nz), nx, ny, nz)
+    _shift(x1, d, _room(support, d, -lam * id_ * wd, nx, ny, nz), nx, ny, nz)
+    vn = 0.0
+    for k, n_k in ((0, nx), (1, ny), (2, nz)):
+        vn += (wa * qd[k, a] + wb * qd[k, b] - wc * qd[k, c] - wd * qd[k, d]) * n_k
+    if vn < 0.0:
+        mu = -vn / denom
+        for k, n_k in ((0, nx), (1, ny), (2, nz)):
+            for idx, wt in ((a, mu * ia * wa), (b, mu * ib * wb), (c, -mu * ic * wc),
+                            (d, -mu * id_ * wd)):
+                qd[k, idx] += wt * n_k
+                dv[k, idx] += wt * n_k
+    return True
+
+
+@numba.njit(**JIT)
 def self_contact(
         # inputs / outputs: the level after the step and its velocity change, corrected
         q, qd, dv,
@@ -994,8 +1299,9 @@ def self_contact(
     """
     Keep a level's points ``thickness`` away from its triangles (see the module docstring).
 
-    Returns ``(pairs, substeps, dropped)``: the pairs found, the detection's
-    sub-intervals, and pairs beyond the per-step capacity (0 normally). ``pairs`` is -1,
+    Returns ``(pairs, substeps, dropped)``: the pairs found (point-triangle and edge
+    pairs), the detection's sub-intervals, and pairs beyond the per-step capacity (0
+    normally). ``pairs`` is -1,
     and nothing is moved, when a point moved more than ``max_move`` against the mean.
     """
     rows, cols = hold_kind.shape
@@ -1024,6 +1330,9 @@ def self_contact(
     substeps = min(MAX_SUBSTEPS, max(MIN_SUBSTEPS, int(math.ceil(longest / (0.5 * edge)))))
     pairs = np.empty((PAIRS_PER_POINT * n, 2), dtype=np.int64)
     sides = np.empty(PAIRS_PER_POINT * n)
+    free_edges = 2 * (rows + cols)
+    edge_pairs = np.empty((EDGE_PAIRS_PER_EDGE * free_edges, 2), dtype=np.int64)
+    edge_sides = np.empty(EDGE_PAIRS_PER_EDGE * free_edges)
     first, dropped = -1, 0
     # the first detection tests only round the points marked moved (the caller's: those
     # that moved since its last call's first detection)
@@ -1048,19 +1357,22 @@ def self_contact(
         # pushing a pair apart can bring a point near another triangle: detect again
         _patch_boxes(x0, x1, rows, cols, PATCH, thickness, boxes, ends, cones, stale)
         subs_ready &= ~stale
-        found = _detect(x0, x1, rows, cols, thickness, substeps, dirty, fresh, fresh_blocks,
-                        pairs, sides, boxes, ends, cones, subs, subs_ready)
+        found, edges_found = _detect(x0, x1, rows, cols, thickness, substeps, dirty, fresh,
+                                     fresh_blocks, pairs, sides, edge_pairs, edge_sides,
+                                     boxes, ends, cones, subs, subs_ready)
         kept = min(found, pairs.shape[0])
-        first = found if first < 0 else first
-        dropped = max(dropped, found - kept)
-        if found == 0:
+        edges_kept = min(edges_found, edge_pairs.shape[0])
+        first = found + edges_found if first < 0 else first
+        dropped = max(dropped, found - kept + edges_found - edges_kept)
+        if found + edges_found == 0:
             break
         # the last round moves points alone: Gauss-Seidel over a cluster of pairs that
         # share vertices converges slowly (a fast fold left 1-3 of 300 pairs crossed
         # after 16 rounds)
         fresh[:] = False
         _resolve_passes(x0, x1, qdf, dvf, inv_mass, held_up, cols, pairs, sides, kept,
-                        target, friction, h, attempt == iterations, fresh)
+                        target, friction, h, attempt == iterations, fresh, edge_pairs,
+                        edge_sides, edges_kept)
         fresh_blocks = _fresh_blocks(fresh, rows, cols)
         _dirty_patches(fresh_blocks, dirty)
         stale[:, :] = dirty
@@ -1070,9 +1382,11 @@ def self_contact(
 
 @numba.njit(**JIT)
 def _resolve_passes(x0, x1, qd, dv, inv_mass, support, cols, pairs, sides, kept, target,
-                    friction, h, one_side, fresh):
+                    friction, h, one_side, fresh, edge_pairs, edge_sides, edges_kept):
     """
     ``RESOLVE_PASSES`` Gauss-Seidel passes over the pairs; mark in ``fresh`` the points they move.
+
+    Each pass takes the point-triangle pairs, then the ``edges_kept`` edge pairs.
 
     A pair found apart is not tested again until a push moves one of its vertices: the
     test would find it apart again and do nothing, so the result is the same bit for bit
@@ -1098,6 +1412,15 @@ def _resolve_passes(x0, x1, qd, dv, inv_mass, support, cols, pairs, sides, kept,
                 checked[e] = -1
             else:
                 checked[e] = pushes
+        for e in range(edges_kept):
+            if _resolve_edges(x0, x1, qd, dv, inv_mass, support, cols, edge_pairs[e, 0],
+                              edge_pairs[e, 1], edge_sides[e], target, one_side):
+                pushes += 1
+                a, b = _edge(edge_pairs[e, 0], cols)
+                c, d = _edge(edge_pairs[e, 1], cols)
+                for v in (a, b, c, d):
+                    fresh[v] = True
+                    stamps[v] = pushes
 
 
 def patch_cache(rows, cols):
