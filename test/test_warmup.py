@@ -61,3 +61,20 @@ def test_parallel_builds_are_other_functions_with_their_own_cache_entries():
         # the pure-Python choice agrees with the kernels' own chunking
         assert (kernels.builds(rows, cols, 2) is kernels.PARALLEL) == (
             kernels.chunk_count(rows, cols) > 1), (rows, cols)
+
+
+def test_a_cache_directory_pruned_during_the_warm_up_is_survived(monkeypatch, tmp_path):
+    """
+    Another process started on edited kernel sources prunes this one's cache directory.
+
+    The warm-up then cannot write its stamp: the kernels are compiled all the same, no
+    error (it raised FileNotFoundError, seen when the test suite ran while a kernel was
+    edited), and nothing says they are cached.
+    """
+    from hcloth_ros.core import warmup
+    gone = tmp_path / 'pruned'
+    monkeypatch.setattr(jit, 'CACHE_DIR', str(gone))
+    seconds = warmup.warm_up(solvers=['explicit'], parallel=False, energy=False, processes=1)
+    assert seconds >= 0.0
+    assert not gone.exists()
+    assert not warmup.kernels_cached(solvers=['explicit'], parallel=False, energy=False)

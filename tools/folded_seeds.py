@@ -15,8 +15,8 @@ counts those retried. ``--intersections`` counts after every accepted step the f
 level's edges through its own triangles (``tools/intersections.py``: a tangle, which
 self-contact's pairs may not see) and prints the steps with any. Seed 2 tangled with the
 release before the free edges were tested against edges (8.81 before a refusal, edges
-through triangles after steps 7-11 and 84-89); now its largest strain is 1.24 (three steps
-at a corner of the top layer) with no edge through a triangle (README, "Self-contact").
+through triangles after steps 7-11 and 84-89); now its largest strain is 0.24 with no edge
+through a triangle (README, "Self-contact").
 """
 
 import argparse

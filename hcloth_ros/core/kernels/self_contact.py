@@ -21,7 +21,8 @@ whose swept boxes its path comes near, then their triangles:
   sub-intervals (``S`` such that no point moves more than half the longest edge relative
   to the level's mean motion in one, at most ``MAX_SUBSTEPS``) and, at the time that
   distance interpolates to zero, it lies in the triangle or within the thickness of its
-  border; the pair keeps the side it came from;
+  border (but for the cloth's free edges: a point past one went round it); the pair
+  keeps the side it came from;
 * near: at the end it is nearer than the thickness to the triangle's closest point
   (inside, on an edge or at a vertex); the pair keeps the side of the plane it is on.
 
