@@ -14,18 +14,9 @@ edges through triangles by the edge's first end (rows, cols). Brute force over a
 grid of cells twice the grid spacing: about 0.1 s on 129 x 129.
 """
 
-from hcloth_ros.core.kernels.self_contact import RING
+from hcloth_ros.core.kernels.self_contact import _orient, _triangle, RING
 import numba
 import numpy as np
-
-
-@numba.njit(cache=False)
-def _orient(a, b, c, d):
-    """Six times the signed volume of tetrahedron a, b, c, d."""
-    ux, uy, uz = b[0] - a[0], b[1] - a[1], b[2] - a[2]
-    vx, vy, vz = c[0] - a[0], c[1] - a[1], c[2] - a[2]
-    wx, wy, wz = d[0] - a[0], d[1] - a[1], d[2] - a[2]
-    return (uy * vz - uz * vy) * wx + (uz * vx - ux * vz) * wy + (ux * vy - uy * vx) * wz
 
 
 @numba.njit(cache=False)
@@ -35,13 +26,6 @@ def _pierces(a, b, p, q, r):
         return False
     s1, s2, s3 = _orient(a, b, p, q), _orient(a, b, q, r), _orient(a, b, r, p)
     return (s1 > 0 and s2 > 0 and s3 > 0) or (s1 < 0 and s2 < 0 and s3 < 0)
-
-
-@numba.njit(cache=False)
-def _vertices(t, cols):
-    k = t // 2
-    a = (k // (cols - 1)) * cols + k % (cols - 1)
-    return (a, a + 1, a + cols + 1) if t % 2 == 0 else (a, a + cols + 1, a + cols)
 
 
 @numba.njit(cache=False)
@@ -65,7 +49,7 @@ def _count(x, rows, cols, cell):
     boxes = np.empty((triangles, 6), np.int64)
     starts = np.zeros(dims[0] * dims[1] * dims[2] + 1, np.int64)
     for t in range(triangles):
-        _cells(x, _vertices(t, cols), low, cell, boxes[t])
+        _cells(x, _triangle(t, cols), low, cell, boxes[t])
         b = boxes[t]
         for i in range(b[0], b[3] + 1):
             for j in range(b[1], b[4] + 1):
@@ -109,7 +93,7 @@ def _count(x, rows, cols, cell):
                                 if tr - RING <= r2 and r <= tr + 1 + RING and \
                                         tc - RING <= max(c, c2) and min(c, c2) <= tc + 1 + RING:
                                     continue
-                                p, q, s = _vertices(t, cols)
+                                p, q, s = _triangle(t, cols)
                                 if _pierces(x[:, a], x[:, b], x[:, p], x[:, q], x[:, s]):
                                     per_point[r, c] += 1
     return per_point.sum(), per_point
