@@ -1123,6 +1123,78 @@ def _room(support, v, a, nx, ny, nz):
 
 
 @numba.njit(**JIT)
+def _motion(x0, x1, verts, weights):
+    """Return the motion over the step of the four vertices' weighted sum."""
+    rx = ry = rz = 0.0
+    for m in range(4):
+        idx, wt = verts[m], weights[m]
+        rx += wt * (x1[0, idx] - x0[0, idx])
+        ry += wt * (x1[1, idx] - x0[1, idx])
+        rz += wt * (x1[2, idx] - x0[2, idx])
+    return rx, ry, rz
+
+
+@numba.njit(**JIT)
+def _free_mass(inv_mass, support, v, n, ahead):
+    """Vertex v's inverse mass for a push along n (against it if not ``ahead``), 0 if blocked."""
+    sign = 1.0 if ahead else -1.0
+    return 0.0 if _blocked(support, v, sign * n[0], sign * n[1], sign * n[2]) else inv_mass[v]
+
+
+@numba.njit(**JIT)
+def _push(x1, qd, dv, inv_mass, support, verts, weights, ahead, nx, ny, nz, gap, one_side):
+    """
+    Move a pair's four vertices so that their weighted sum gains ``-gap`` along n.
+
+    A pair is a point and a triangle (weights ``1, -u, -v, -w``) or two edges (``1 - s,
+    s, t - 1, -t``): the first ``ahead`` vertices move along n, the others against it.
+    Velocities lose the sum's approach along n (inelastic: a push turned into velocity,
+    push / h, made the layers bounce and stretched the cloth). A vertex resting on an
+    obstacle does not move into it (its weight is zero for this push); ``one_side``:
+    only the first side moves (only the second if the first is held). Returns ``(lam,
+    denom, inverse masses used)``; ``denom`` 0: nothing could move.
+    """
+    n_ = (nx, ny, nz)
+    ims = (_free_mass(inv_mass, support, verts[0], n_, 0 < ahead),
+           _free_mass(inv_mass, support, verts[1], n_, 1 < ahead),
+           _free_mass(inv_mass, support, verts[2], n_, False),
+           _free_mass(inv_mass, support, verts[3], n_, False))
+    if one_side:
+        first = ims[0] + ims[1] if ahead == 2 else ims[0]
+        ims = (ims[0] if first > 0.0 else 0.0,
+               ims[1] if (first > 0.0) == (ahead == 2) else 0.0,
+               0.0 if first > 0.0 else ims[2], 0.0 if first > 0.0 else ims[3])
+    # no vertex moves further than the gap: with the point held (a pin, a grasp), a free
+    # vertex of small weight w alone would move gap / w (12 m once, on a 257 x 257 folded
+    # drop with points held); the pair is then only partly separated and the next pass
+    # goes on. With every point free it does not bind (masses within 4x of each other)
+    total, most = 0.0, 0.0
+    for m in range(4):
+        total += weights[m] * weights[m] * ims[m]
+        most = max(most, abs(weights[m]) * ims[m])
+    denom = max(total, most)
+    if not denom > 0.0:
+        return 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
+    lam = -gap / denom
+    for m in range(4):
+        v = verts[m]
+        _shift(x1, v, _room(support, v, lam * ims[m] * weights[m], nx, ny, nz), nx, ny, nz)
+    vn = 0.0
+    for d, n_d in ((0, nx), (1, ny), (2, nz)):
+        along = 0.0
+        for m in range(4):
+            along += weights[m] * qd[d, verts[m]]
+        vn += along * n_d
+    if vn < 0.0:
+        mu = -vn / denom
+        for d, n_d in ((0, nx), (1, ny), (2, nz)):
+            for m in range(4):
+                qd[d, verts[m]] += mu * ims[m] * weights[m] * n_d
+                dv[d, verts[m]] += mu * ims[m] * weights[m] * n_d
+    return lam, denom, ims[0], ims[1], ims[2], ims[3]
+
+
+@numba.njit(**JIT)
 def _resolve(x0, x1, qd, dv, inv_mass, support, cols, p, t, side, thickness, friction, h,
              one_side):
     """
@@ -1136,49 +1208,14 @@ def _resolve(x0, x1, qd, dv, inv_mass, support, cols, p, t, side, thickness, fri
     nx, ny, nz, gap, u, v, w = _separation(x1, p, i, j, k, side, thickness)
     if not gap < 0.0:
         return False
-    rx = (x1[0, p] - x0[0, p]) - u * (x1[0, i] - x0[0, i]) - v * (x1[0, j] - x0[0, j]) \
-        - w * (x1[0, k] - x0[0, k])
-    ry = (x1[1, p] - x0[1, p]) - u * (x1[1, i] - x0[1, i]) - v * (x1[1, j] - x0[1, j]) \
-        - w * (x1[1, k] - x0[1, k])
-    rz = (x1[2, p] - x0[2, p]) - u * (x1[2, i] - x0[2, i]) - v * (x1[2, j] - x0[2, j]) \
-        - w * (x1[2, k] - x0[2, k])
+    verts, weights = (p, i, j, k), (1.0, -u, -v, -w)
+    rx, ry, rz = _motion(x0, x1, verts, weights)
     if -gap > 2.0 * thickness + math.sqrt(rx * rx + ry * ry + rz * rz):
         return False
-    ip, ii, ij, ik = inv_mass[p], inv_mass[i], inv_mass[j], inv_mass[k]
-    # the point moves along n, the triangle's vertices against it
-    ip = 0.0 if _blocked(support, p, nx, ny, nz) else ip
-    ii = 0.0 if _blocked(support, i, -nx, -ny, -nz) else ii
-    ij = 0.0 if _blocked(support, j, -nx, -ny, -nz) else ij
-    ik = 0.0 if _blocked(support, k, -nx, -ny, -nz) else ik
-    if one_side:
-        if ip > 0.0:
-            ii, ij, ik = 0.0, 0.0, 0.0
-        else:
-            ip = 0.0
-    # no vertex moves further than the gap: with the point held (a pin, a grasp), a free
-    # vertex of small weight w alone would move gap / w (12 m once, on a 257 x 257 folded
-    # drop with points held); the pair is then only partly separated and the next pass
-    # goes on. With every point free it does not bind (masses within 4x of each other)
-    denom = max(ip + u * u * ii + v * v * ij + w * w * ik, ii * u, ij * v, ik * w)
+    lam, denom, ip, ii, ij, ik = _push(x1, qd, dv, inv_mass, support, verts, weights, 1,
+                                       nx, ny, nz, gap, one_side)
     if not denom > 0.0:
         return False
-    lam = -gap / denom
-    # positions apart; velocities lose only their approach (inelastic): a push turned
-    # into velocity (push / h) made the layers bounce and stretched the cloth
-    _shift(x1, p, _room(support, p, lam * ip, nx, ny, nz), nx, ny, nz)
-    _shift(x1, i, _room(support, i, -lam * ii * u, nx, ny, nz), nx, ny, nz)
-    _shift(x1, j, _room(support, j, -lam * ij * v, nx, ny, nz), nx, ny, nz)
-    _shift(x1, k, _room(support, k, -lam * ik * w, nx, ny, nz), nx, ny, nz)
-    vn = 0.0
-    for d, n_d in ((0, nx), (1, ny), (2, nz)):
-        vn += (qd[d, p] - u * qd[d, i] - v * qd[d, j] - w * qd[d, k]) * n_d
-    if vn < 0.0:
-        mu = -vn / denom
-        for d, n_d in ((0, nx), (1, ny), (2, nz)):
-            for idx, wt in ((p, mu * ip), (i, -mu * ii * u), (j, -mu * ij * v),
-                            (k, -mu * ik * w)):
-                qd[d, idx] += wt * n_d
-                dv[d, idx] += wt * n_d
     if friction > 0.0:
         push = lam * (ip + u * u * ii + v * v * ij + w * w * ik)
         rx, ry, rz = rx + push * nx, ry + push * ny, rz + push * nz
@@ -1250,44 +1287,12 @@ def _resolve_edges(x0, x1, qd, dv, inv_mass, support, cols, e, f, side, thicknes
     if not gap < 0.0:
         return False
     # the closest points' motion over the step: a pair this deep was not made by it
-    rx = ry = rz = 0.0
-    for idx, wt in ((a, 1.0 - s), (b, s), (c, t - 1.0), (d, -t)):
-        rx += wt * (x1[0, idx] - x0[0, idx])
-        ry += wt * (x1[1, idx] - x0[1, idx])
-        rz += wt * (x1[2, idx] - x0[2, idx])
+    verts, weights = (a, b, c, d), (1.0 - s, s, t - 1.0, -t)
+    rx, ry, rz = _motion(x0, x1, verts, weights)
     if -gap > 2.0 * thickness + math.sqrt(rx * rx + ry * ry + rz * rz):
         return False
-    ia, ib, ic, id_ = inv_mass[a], inv_mass[b], inv_mass[c], inv_mass[d]
-    ia = 0.0 if _blocked(support, a, nx, ny, nz) else ia
-    ib = 0.0 if _blocked(support, b, nx, ny, nz) else ib
-    ic = 0.0 if _blocked(support, c, -nx, -ny, -nz) else ic
-    id_ = 0.0 if _blocked(support, d, -nx, -ny, -nz) else id_
-    if one_side:
-        if ia + ib > 0.0:
-            ic, id_ = 0.0, 0.0
-        else:
-            ia, ib = 0.0, 0.0
-    wa, wb, wc, wd = 1.0 - s, s, 1.0 - t, t
-    denom = max(wa * wa * ia + wb * wb * ib + wc * wc * ic + wd * wd * id_, wa * ia,
-                wb * ib, wc * ic, wd * id_)
-    if not denom > 0.0:
-        return False
-    lam = -gap / denom
-    _shift(x1, a, _room(support, a, lam * ia * wa, nx, ny, nz), nx, ny, nz)
-    _shift(x1, b, _room(support, b, lam * ib * wb, nx, ny, nz), nx, ny, nz)
-    _shift(x1, c, _room(support, c, -lam * ic * wc, nx, ny, nz), nx, ny, nz)
-    _shift(x1, d, _room(support, d, -lam * id_ * wd, nx, ny, nz), nx, ny, nz)
-    vn = 0.0
-    for k, n_k in ((0, nx), (1, ny), (2, nz)):
-        vn += (wa * qd[k, a] + wb * qd[k, b] - wc * qd[k, c] - wd * qd[k, d]) * n_k
-    if vn < 0.0:
-        mu = -vn / denom
-        for k, n_k in ((0, nx), (1, ny), (2, nz)):
-            for idx, wt in ((a, mu * ia * wa), (b, mu * ib * wb), (c, -mu * ic * wc),
-                            (d, -mu * id_ * wd)):
-                qd[k, idx] += wt * n_k
-                dv[k, idx] += wt * n_k
-    return True
+    return _push(x1, qd, dv, inv_mass, support, verts, weights, 2, nx, ny, nz, gap,
+                 one_side)[1] > 0.0
 
 
 @numba.njit(**JIT)
