@@ -256,9 +256,9 @@ def _crossing(x0, x1, p, i, j, k, ta, tb, sda, na, sdb, nb, shift, thickness, ro
     tilted triangles. The perturbed folded drops of ``tools/folded_seeds.py`` at 1 mm,
     seeds 1-80, largest strain over 1: 7 with that; with the plane's own time 2 at a
     tolerance of a thickness (of 40), 1 at 1e-6 and 0.5 thickness, 0 at 0.3. Below 0.5,
-    the unperturbed 257 x 257 drop, whose layers' free edges lie exactly over each other,
-    stretched its corners for a step or two: 0.63 at 1e-6, 0.32 at 0.2, 0.30 at 0.3; at
-    0.5, as with the release before, its largest strain is the first steps' 0.20.)
+    the contact bench's unperturbed 257 x 257 drop, whose layers' free edges lie exactly
+    over each other, stretched its corners for a step or two: 0.63 at 1e-6, 0.30 at 0.3,
+    against 0.20; README, "Self-contact".)
     """
     if not (sda != 0.0 and sda * sdb <= 0.0):
         return 0.0      # (on the plane at ``tb``: this sub-interval's crossing)
