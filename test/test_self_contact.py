@@ -12,11 +12,11 @@ a triangle of the other layer to meet.
 from hcloth_ros.bench.self_contact import folded, GAP
 from hcloth_ros.core import ClothBuilder, Control, make_scene, make_solver, State
 from hcloth_ros.core import kernels
-from hcloth_ros.core.kernels.self_contact import (_edge_side, _may_cross, _pair_side,
-                                                  _resolve, _resolve_passes, _triangle,
-                                                  MAX_SUBSTEPS, MIN_SUBSTEPS,
+from hcloth_ros.core.kernels.self_contact import (_edge_side, _fresh_blocks, _may_cross,
+                                                  _pair_side, _resolve, _resolve_passes,
+                                                  _triangle, MAX_SUBSTEPS, MIN_SUBSTEPS,
                                                   obstacle_supports, ON_EDGE, patch_cache,
-                                                  RESOLVE_PASSES, RING)
+                                                  RESOLVE_PASSES, RING, SUB)
 import numpy as np
 import pytest
 
@@ -553,6 +553,77 @@ def test_a_call_told_which_points_moved_finds_what_a_whole_call_finds():
     for mine, theirs in zip((end, qd, dv), whole):
         assert np.array_equal(mine, theirs)
     assert violations(start, end, THICKNESS) == (0, 0)
+
+
+@pytest.mark.parametrize('rows, cols', [(2, 2), (3, 3), (4, 9), (33, 17), (129, 129)])
+def test_fresh_blocks_are_the_blocks_holding_a_marked_point(rows, cols):
+    """
+    A block of SUB x SUB cells is marked when one of its vertices is, its border included.
+
+    Against the definition, on grids of odd and even sides and masks from empty to full.
+    """
+    rng = np.random.default_rng(rows * cols)
+    block_rows, block_cols = (rows - 2) // SUB + 1, (cols - 2) // SUB + 1
+    for share in (0.0, 0.002, 0.05, 0.5, 1.0):
+        fresh = rng.random(rows * cols) < share
+        if share == 0.002:
+            fresh[-1] = True                # the last point: in the last block only
+        marked = fresh.reshape(rows, cols)
+        expected = np.array([[marked[si * SUB:min((si + 1) * SUB, rows - 1) + 1,
+                                     sj * SUB:min((sj + 1) * SUB, cols - 1) + 1].any()
+                              for sj in range(block_cols)] for si in range(block_rows)])
+        assert np.array_equal(_fresh_blocks(fresh, rows, cols), expected)
+
+
+def _longest_edge(x, rows, cols):
+    """Return the longest structural or diagonal edge of a level ``(3, rows, cols)`` (numpy)."""
+    return max(np.linalg.norm(x[:, :, 1:] - x[:, :, :-1], axis=0).max(),
+               np.linalg.norm(x[:, 1:] - x[:, :-1], axis=0).max(),
+               np.linalg.norm(x[:, 1:, 1:] - x[:, :-1, :-1], axis=0).max())
+
+
+@pytest.mark.parametrize('tilt, stretch', [(0.1, 1.5), (5.0, 3.0)])
+def test_a_later_call_takes_the_sub_intervals_of_both_ends_longest_edges(tilt, stretch):
+    """
+    A step's later call takes as many sub-intervals as the longest edge of either end asks.
+
+    It skips the end's longest edge when no point moved farther than the start's longest
+    edge (the fewest sub-intervals whatever the end's). The end tilts the cloth by
+    ``tilt`` start edges from one side to the other and stretches one spring to
+    ``stretch`` times the start's longest edge: first no point moves that far, then the
+    end's edge takes sub-intervals away from those the start's alone would ask for.
+    """
+    model = folded_model(resolution=(17, 17), levels=4, ground=None)
+    start = State.at_rest(model).q[3]
+    lv = model.level(3)
+    rows, cols = lv.shape
+    edge0 = _longest_edge(start, rows, cols)
+    end = start.copy()
+    end[2] += tilt * edge0 * np.linspace(0.0, 1.0, cols)[None, :]
+    end[:, 8, 9] = end[:, 8, 8] + (end[:, 8, 9] - end[:, 8, 8]) * stretch * edge0 / \
+        np.linalg.norm(end[:, 8, 9] - end[:, 8, 8])
+    shifted = end - start - (end - start).mean(axis=(1, 2))[:, None, None]
+    longest = np.linalg.norm(shifted, axis=0).max()
+    edge = max(edge0, _longest_edge(end, rows, cols))
+
+    def substeps(edge):
+        return min(MAX_SUBSTEPS, max(MIN_SUBSTEPS, int(np.ceil(longest / (0.5 * edge)))))
+
+    assert edge > 1.4 * edge0
+    if tilt < 1.0:
+        assert longest <= edge0             # the end's edge skipped
+    else:
+        assert substeps(edge) < substeps(edge0)     # the end's edge counts
+    cache = patch_cache(*lv.shape)
+    hold, support = np.zeros(lv.shape, dtype=np.int8), _no_support(lv)
+    every = np.ones(lv.shape, dtype=np.bool_)
+    first = kernels.self_contact(start.copy(), np.zeros_like(end), np.zeros_like(end), start,
+                                 lv.mass, hold, every, support, THICKNESS, 0.0, 4, H, 10.0,
+                                 *cache, False)
+    later = kernels.self_contact(end.copy(), np.zeros_like(end), np.zeros_like(end), start,
+                                 lv.mass, hold, every, support, THICKNESS, 0.0, 4, H, 10.0,
+                                 *cache, True)
+    assert first[1] == MIN_SUBSTEPS and later[1] == substeps(edge)
 
 
 def test_resolve_passes_skip_only_pairs_nothing_moved():
