@@ -16,7 +16,7 @@ level's edges through its own triangles (``tools/intersections.py``: a tangle, w
 self-contact's pairs may not see) and prints the steps with any. Seed 2 tangled with the
 release before the free edges were tested against edges (8.81 before a refusal, edges
 through triangles after steps 7-11 and 84-89); now its largest strain is 0.24 with no edge
-through a triangle (README, "Self-contact").
+through a triangle (doc/self_contact_log.md).
 """
 
 import argparse

@@ -350,7 +350,7 @@ class Solver:
         its response is inelastic, and the motion over the whole step turned its pushes
         into velocity: points it pushed back and forth started the next step further off
         (the folded drops of ``tools/folded_seeds.py --noise 1e-3``: 4 of 20 seeds over
-        strain 1 so, 1 with this; README, "Self-contact").
+        strain 1 so, 1 with this; doc/self_contact_log.md).
         """
         moved = np.any(self._q[k] != integrated, axis=0)
         if moved.any():

@@ -258,7 +258,7 @@ def _crossing(x0, x1, p, i, j, k, ta, tb, sda, na, sdb, nb, shift, thickness, ro
     tolerance of a thickness (of 40), 1 at 1e-6 and 0.5 thickness, 0 at 0.3. Below 0.5,
     the contact bench's unperturbed 257 x 257 drop, whose layers' free edges lie exactly
     over each other, stretched its corners for a step or two: 0.63 at 1e-6, 0.30 at 0.3,
-    against 0.20; README, "Self-contact".)
+    against 0.20; doc/self_contact_log.md.)
     """
     if not (sda != 0.0 and sda * sdb <= 0.0):
         return 0.0      # (on the plane at ``tb``: this sub-interval's crossing)
@@ -1594,7 +1594,7 @@ def obstacle_supports(planes, boxes, margin, q, out):
     ``planes`` (P, 4) and ``boxes`` (B, 6) as :class:`~hcloth_ros.core.scene.Scene` holds
     them; see :func:`~hcloth_ros.core.self_contact.supports` for what is written. A point
     at a time: numpy's passes over the level took ten times as long (0.40 against 0.04 ms
-    a call on the folded drop's 129 x 129 level with a ground, README "Self-contact";
+    a call on the folded drop's 129 x 129 level with a ground, doc/self_contact_log.md;
     three calls a step in contact).
     """
     rows, cols = q.shape[1], q.shape[2]
