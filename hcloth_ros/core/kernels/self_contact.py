@@ -874,7 +874,7 @@ def _segment_box(x0, x1, a, b, shift, reach, out):
 
 @numba.njit(**JIT)
 def _edge_against(x0, x1, rows, cols, thickness, substeps, subs, shift, e, bi, bj, fresh,
-                  fresh_blocks, pairs, sides, count, boxes):
+                  fresh_blocks, pairs, sides, count, boxes, b_boxes):
     """
     Test free edge e against the edges of patch B; returns the new pair count.
 
@@ -883,21 +883,24 @@ def _edge_against(x0, x1, rows, cols, thickness, substeps, subs, shift, e, bi, b
     with an end within ``RING`` rows and columns of one of e's are skipped (the cloth's
     own surface), and so are pairs of two free edges but once (e the lower index). Only
     pairs with an end marked in ``fresh`` are tested (``fresh_blocks``: the blocks with
-    one, see :func:`_fresh_blocks`). ``boxes``: room for three boxes (6 numbers each).
+    one, see :func:`_fresh_blocks`). ``boxes``: room for two boxes (6 numbers each);
+    ``b_boxes``: the boxes B's blocks sweep in the frame moving by ``shift``, in row-major
+    order (:func:`_moving_box`).
     """
     a, b = _edge(e, cols)
     moved = fresh[a] or fresh[b]
     ra0, ra1 = min(a // cols, b // cols), max(a // cols, b // cols)
     ca0, ca1 = min(a % cols, b % cols), max(a % cols, b % cols)
-    box, block, other = boxes[0], boxes[1], boxes[2]
+    box, other = boxes[0], boxes[1]
     _segment_box(x0, x1, a, b, shift, thickness, box)
     per = PATCH // SUB
+    m = -1
     for si in range(bi * per, min((bi + 1) * per, subs.shape[0])):
         for sj in range(bj * per, min((bj + 1) * per, subs.shape[1])):
+            m += 1
             if not (moved or fresh_blocks[si, sj]):
                 continue
-            _moving_box(subs[si, sj], shift, 0.0, block)
-            if not _overlap(box, block):
+            if not _overlap(box, b_boxes[m]):
                 continue
             for u in range(si * SUB, min((si + 1) * SUB, rows - 1)):
                 for v in range(sj * SUB, min((sj + 1) * SUB, cols - 1)):
@@ -939,7 +942,15 @@ def _free_edges_against(x0, x1, rows, cols, thickness, substeps, subs, shift, ai
     An edge with no end marked in ``fresh`` is tested only if B has a block marked in
     ``fresh_blocks`` (``dirty``: such patches).
     """
-    boxes = np.empty((3, 6))
+    boxes = np.empty((2, 6))
+    # B's blocks' boxes in the pair's frame, once for all of A's edges
+    per = PATCH // SUB
+    b_boxes = np.empty((per * per, 6))
+    m = 0
+    for si in range(bi * per, min((bi + 1) * per, subs.shape[0])):
+        for sj in range(bj * per, min((bj + 1) * per, subs.shape[1])):
+            _moving_box(subs[si, sj], shift, 0.0, b_boxes[m])
+            m += 1
     r0, r1 = ai * PATCH, min((ai + 1) * PATCH, rows - 1)
     c0, c1 = aj * PATCH, min((aj + 1) * PATCH, cols - 1)
     for side in range(4):
@@ -950,7 +961,7 @@ def _free_edges_against(x0, x1, rows, cols, thickness, substeps, subs, shift, ai
                 if dirty[bi, bj] or fresh[e // 3] or fresh[e // 3 + 1]:
                     count = _edge_against(x0, x1, rows, cols, thickness, substeps, subs,
                                           shift, e, bi, bj, fresh, fresh_blocks, pairs,
-                                          sides, count, boxes)
+                                          sides, count, boxes, b_boxes)
         if side == 2 and c0 == 0 or side == 3 and c1 == cols - 1:
             col = 0 if side == 2 else cols - 1
             for r in range(r0, r1):
@@ -958,7 +969,7 @@ def _free_edges_against(x0, x1, rows, cols, thickness, substeps, subs, shift, ai
                 if dirty[bi, bj] or fresh[e // 3] or fresh[e // 3 + cols]:
                     count = _edge_against(x0, x1, rows, cols, thickness, substeps, subs,
                                           shift, e, bi, bj, fresh, fresh_blocks, pairs,
-                                          sides, count, boxes)
+                                          sides, count, boxes, b_boxes)
     return count
 
 
