@@ -116,12 +116,12 @@ PARAMS = [
           '(Gauss-Seidel, points lying on an obstacle or a moving body move along its '
           'surface, points a body presses into the ground stay where it holds them: holds '
           "springs across a table edge and round a finger) or jacobi (the levels' own: on "
-          'the 129 x 129 table drop 0.77 strain at 1.4x the step, see README)',
+          'the 129 x 129 table drop 0.77 strain at 1.4x the step, see doc/contact_log.md)',
           choices=CONTACT_STRAIN),
     Param('solver.contact_relaxation', TANGENT_RELAXATION, 'tangent contact strain '
           'limiting moves a spring free to move along itself this many times its correction '
           '(over-relaxation; 1: plain Gauss-Seidel, about 1.8x the step on the 129 x 129 '
-          'table drop, see README)',
+          'table drop, see doc/contact_log.md)',
           1.0, 1.95),
     Param('self_contact.thickness', 0.0, 'self-contact: finest points stay this far from '
           "the cloth's own triangles and never cross one (m); 0 switches it off", 0.0, 0.1),

@@ -45,7 +45,7 @@ CONTACT_SWEEPS = {'jacobi': 10, 'tangent': 300}
 # contact_relaxation's default: tangent strain limiting moves a spring's ends this many
 # times its correction where they are free to move along it (kernels.contact_strain): on
 # the 129 x 129 table drop 33.5 ms a step instead of 58.7, the contact bench's finger 13.1
-# instead of 23.3, the largest strain the same or lower (README "Contact"); 1.8 was faster
+# instead of 23.3, the largest strain the same or lower (doc/contact_log.md); 1.8 was faster
 # still but let a cloth started in a box and a rising ball stretch more
 TANGENT_RELAXATION = 1.5
 NO_PLANES = np.zeros((0, 4))
