@@ -514,6 +514,17 @@ def _moving_box(ends, shift, reach, out):
 
 
 @numba.njit(**JIT)
+def _patch_block_boxes(subs, bi, bj, shift, out):
+    """Write the boxes of patch (bi, bj)'s blocks in the frame moving by ``shift``, row-major."""
+    per = PATCH // SUB
+    m = 0
+    for si in range(bi * per, min((bi + 1) * per, subs.shape[0])):
+        for sj in range(bj * per, min((bj + 1) * per, subs.shape[1])):
+            _moving_box(subs[si, sj], shift, 0.0, out[m])
+            m += 1
+
+
+@numba.njit(**JIT)
 def _sub_boxes(x0, x1, rows, cols, bi, bj, subs):
     """
     Boxes (:func:`_block_boxes`) of patch (bi, bj)'s blocks of ``SUB`` x ``SUB`` cells.
@@ -666,11 +677,7 @@ def _near_blocks(subs, shift, thickness, ai, aj, bi, bj, fresh_blocks, b_boxes, 
     width = subs.shape[1]
     s0, s1 = bi * per, min((bi + 1) * per, subs.shape[0])
     t0, t1 = bj * per, min((bj + 1) * per, subs.shape[1])
-    m = 0
-    for si in range(s0, s1):
-        for sj in range(t0, t1):
-            _moving_box(subs[si, sj], shift, 0.0, b_boxes[m])
-            m += 1
+    _patch_block_boxes(subs, bi, bj, shift, b_boxes)
     box = np.empty(6)
     for ui in range(ai * per, min((ai + 1) * per, subs.shape[0])):
         for uj in range(aj * per, min((aj + 1) * per, subs.shape[1])):
@@ -944,13 +951,8 @@ def _free_edges_against(x0, x1, rows, cols, thickness, substeps, subs, shift, ai
     """
     boxes = np.empty((2, 6))
     # B's blocks' boxes in the pair's frame, once for all of A's edges
-    per = PATCH // SUB
-    b_boxes = np.empty((per * per, 6))
-    m = 0
-    for si in range(bi * per, min((bi + 1) * per, subs.shape[0])):
-        for sj in range(bj * per, min((bj + 1) * per, subs.shape[1])):
-            _moving_box(subs[si, sj], shift, 0.0, b_boxes[m])
-            m += 1
+    b_boxes = np.empty(((PATCH // SUB) ** 2, 6))
+    _patch_block_boxes(subs, bi, bj, shift, b_boxes)
     r0, r1 = ai * PATCH, min((ai + 1) * PATCH, rows - 1)
     c0, c1 = aj * PATCH, min((aj + 1) * PATCH, cols - 1)
     for side in range(4):
@@ -958,7 +960,8 @@ def _free_edges_against(x0, x1, rows, cols, thickness, substeps, subs, shift, ai
             row = 0 if side == 0 else rows - 1
             for c in range(c0, c1):
                 e = 3 * (row * cols + c)
-                if dirty[bi, bj] or fresh[e // 3] or fresh[e // 3 + 1]:
+                a, b = _edge(e, cols)
+                if dirty[bi, bj] or fresh[a] or fresh[b]:
                     count = _edge_against(x0, x1, rows, cols, thickness, substeps, subs,
                                           shift, e, bi, bj, fresh, fresh_blocks, pairs,
                                           sides, count, boxes, b_boxes)
@@ -966,7 +969,8 @@ def _free_edges_against(x0, x1, rows, cols, thickness, substeps, subs, shift, ai
             col = 0 if side == 2 else cols - 1
             for r in range(r0, r1):
                 e = 3 * (r * cols + col) + 1
-                if dirty[bi, bj] or fresh[e // 3] or fresh[e // 3 + cols]:
+                a, b = _edge(e, cols)
+                if dirty[bi, bj] or fresh[a] or fresh[b]:
                     count = _edge_against(x0, x1, rows, cols, thickness, substeps, subs,
                                           shift, e, bi, bj, fresh, fresh_blocks, pairs,
                                           sides, count, boxes, b_boxes)
