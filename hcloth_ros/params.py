@@ -123,6 +123,10 @@ PARAMS = [
           '(over-relaxation; 1: plain Gauss-Seidel, about 1.8x the step on the 129 x 129 '
           'table drop, see doc/contact_log.md)',
           1.0, 1.95),
+    Param('solver.contact_tethers', True, 'tangent contact strain limiting pulls each point '
+          'within the strain limit of the nearest held point (grip, pin, point a body '
+          'presses into the ground) when its sweeps do not settle in 8: half the step of a '
+          'finger dragging a 257 x 257 cloth (see the README)'),
     Param('self_contact.thickness', 0.0, 'self-contact: finest points stay this far from '
           "the cloth's own triangles and never cross one (m); 0 switches it off", 0.0, 0.1),
     Param('self_contact.friction', 0.3, 'self-contact: friction coefficient between layers',
@@ -364,7 +368,8 @@ def build_solver(model, values):
                        contact_rounds=int(values['solver.contact_rounds']),
                        contact_sweeps=int(values['solver.contact_sweeps']) or None,
                        contact_strain=values['solver.contact_strain'],
-                       contact_relaxation=float(values['solver.contact_relaxation']), **options)
+                       contact_relaxation=float(values['solver.contact_relaxation']),
+                       contact_tethers=bool(values['solver.contact_tethers']), **options)
 
 
 def build_all(values):

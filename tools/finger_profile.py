@@ -10,7 +10,8 @@ m/s. Every kernel call is timed and put to the level its arrays belong to
 (``hcloth_ros.bench.engine.timed_steps``); prints the step's median, each kernel's median
 time a step (0 in a step without a call) and mean calls a step (the 14 largest), and the
 Gauss-Seidel sweeps of the finest level's tangent strain limiting calls that found a spring
-over its limit (median and largest).
+over its limit (median and largest); and how far the cloth went with the finger (the
+finest level's mean move along x) and the largest finest strain of the steps.
 """
 
 import argparse
@@ -35,17 +36,22 @@ def main(argv=None):
     solver = make_solver('multigrid', model,
                          **dict(assignments(args.option), contact_rounds=16))
     bench._move_finger(control, 0)
+    finest_level = model.level_count - 1
+    start = state.q[finest_level][0].copy()
     solver.step(state, control, 1 / 60)        # compile or load
     moves = iter(range(1, args.steps + 1))
+    strains = []
 
     def step():
         bench._move_finger(control, next(moves))
-        solver.step(state, control, 1 / 60)
+        strains.append(solver.step(state, control, 1 / 60).max_strain)
 
     timed, totals = timed_steps(model, step, args.steps, kernels.KERNELS)
     keys = set().union(*timed)
     print(f'{args.size} x {args.size}, {args.steps} steps: step median '
-          f'{1e3 * np.median(totals):.2f} ms')
+          f'{1e3 * np.median(totals):.2f} ms; the finest level moved '
+          f'{np.mean(state.q[finest_level][0] - start):.4f} m along x on average, largest '
+          f'strain {max(strains):.4f}')
 
     def per_step(key, what):
         return [current[key][what] if key in current else 0 for current in timed]

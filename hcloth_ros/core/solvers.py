@@ -116,6 +116,10 @@ class Solver:
     :param contact_relaxation: tangent strain limiting moves the springs whose ends may move
         along them this many times their correction (in [1, 2); 1: plain Gauss-Seidel;
         :func:`~hcloth_ros.core.kernels.contact_strain.tangent_strain_limit`).
+    :param contact_tethers: tangent strain limiting first pulls each point no farther from
+        the nearest held point (a grip, a pin, a point a body presses into a plane) than
+        the strain limit allows at their rest distance
+        (:func:`~hcloth_ros.core.kernels.contact_strain._tether`).
     """
 
     name = ''
@@ -124,7 +128,8 @@ class Solver:
                  strain_refine_iterations=4, strain_tolerance=0.005, blowup_strain=10.0,
                  builds=None, thickness=None, self_friction=0.3, self_contact_iterations=8,
                  self_contact_interval=1, contact_rounds=16, contact_sweeps=None,
-                 contact_strain='tangent', contact_relaxation=TANGENT_RELAXATION):
+                 contact_strain='tangent', contact_relaxation=TANGENT_RELAXATION,
+                 contact_tethers=True):
         if external not in EXTERNAL_MODES:
             raise ValueError(f'external must be one of {EXTERNAL_MODES}, got {external!r}')
         if strain_limit is not None and not (0.0 < strain_limit < 10.0):
@@ -164,6 +169,7 @@ class Solver:
         self.strain_tolerance = float(strain_tolerance)
         self.contact_rounds = int(contact_rounds)
         self.contact_relaxation = float(contact_relaxation)
+        self.contact_tethers = bool(contact_tethers)
         self.contact_sweeps = int(contact_sweeps)
         self.contact_strain = contact_strain
         self.blowup_strain = float(blowup_strain)
@@ -334,7 +340,8 @@ class Solver:
         return self.kernels(k).tangent_strain_limit(
             self._q[k], self._qd[k], self._dv[k], lv.rest, holds.kind, scene.planes,
             scene.boxes, scene.spheres, self._bodies, scene.margin, scene.friction, limit,
-            self.contact_sweeps, self.strain_tolerance, h, self.contact_relaxation)
+            self.contact_sweeps, self.strain_tolerance, h, self.contact_relaxation,
+            self.contact_tethers)
 
     def _pbd_velocity(self, k, state, integrated, h, velocity=None):
         """

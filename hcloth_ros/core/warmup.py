@@ -87,7 +87,7 @@ def _exercise(model, solvers, parallel, energy, self_contact=False, bodies=False
             state.q[1], state.qd[1], np.zeros_like(state.q[1]), model.level(1).rest,
             control.holds(1).kind, scene.planes, scene.boxes, scene.spheres,
             control.bodies.packed(), float(scene.margin), float(scene.friction), 0.1, 10,
-            0.005, 1e-3, 1.0)
+            0.005, 1e-3, 1.0, True)
     state = State.at_rest(model)
     lv, kit = model.level(0), builds['serial']
     if energy:

@@ -14,7 +14,9 @@ limit (position-based projection with the gradients restricted to those planes).
 
 Gauss-Seidel over the structural and shear springs (stencil directions 0, 2, 4, 6), row
 by row: each correction is seen by the next spring, so a correction travels along a flap
-within one sweep instead of one point a sweep. Velocities and the step's velocity change
+within one sweep instead of one point a sweep. Against the sweeps' order it still travels
+one spring a sweep; where held points pull a whole sheet (a finger dragging the cloth)
+the points are first tethered to them (:func:`_tether`). Velocities and the step's velocity change
 take each move divided by ``h``, as :mod:`~hcloth_ros.core.kernels.strain` does.
 """
 
@@ -39,6 +41,9 @@ SMALLEST_RATE = 0.05
 FREE_RATE = 0.9
 # Columns of a row a sweep skips or looks at together (see tangent_strain_limit).
 RUN = 16
+# Sweeps before the points are tethered to the held ones (see tangent_strain_limit): on
+# the contact bench's finger at 257 x 257 46 ms a step with 8 or 16, 58 with 0 or 32.
+TETHER_AFTER = 8
 # The spring directions limited: right, down, down-right, down-left.
 DIRECTIONS = np.array([0, 2, 4, 6])
 STEP_ROWS = np.asarray(STENCIL_DR)[DIRECTIONS].astype(np.int64)
@@ -150,17 +155,22 @@ def _kept(q, r, c, mx, my, mz, planes, boxes, spheres, bodies, margin):
 
 
 @numba.njit(**JIT)
-def _far_from(b, x, y, z, reach):
+def _far_from(b, x, y, z, grow):
     """
-    Whether a point is farther than ``reach`` from every point of body row b.
+    Whether a point is outside the sphere round body row b grown by ``grow``.
 
-    Tested against the sphere round the body's origin that holds it (:func:`.bodies._reach`),
-    with a margin for rounding: most points strain limiting moves on a cloth a finger drags
-    lie far from the finger, and skip its frame change.
+    The sphere about the body's origin that holds the body grown by ``grow`` (a box's
+    corners grow along each axis, a sphere or a capsule along its normal), with a margin
+    for rounding: a point outside it lies on none of the grown surface and inside none
+    of it. Most points strain limiting moves on a cloth a finger drags lie far from the
+    finger, and skip its frame change.
     """
+    if int(b[KIND]) == BOX:
+        far2 = (b[SIZE] + grow) ** 2 + (b[SIZE + 1] + grow) ** 2 + (b[SIZE + 2] + grow) ** 2
+    else:
+        far2 = (_reach(b) + grow) ** 2
     dx, dy, dz = x - b[T_END], y - b[T_END + 1], z - b[T_END + 2]
-    far = (_reach(b) + reach) * (1.0 + 1e-9)
-    return dx * dx + dy * dy + dz * dz > far * far
+    return dx * dx + dy * dy + dz * dz > far2 * (1.0 + 1e-9)
 
 
 @numba.njit(**JIT)
@@ -230,8 +240,139 @@ def _touch(r, c, rows, cols, now, later):
 
 
 @numba.njit(**JIT)
+def _near_a_body(bodies, x, y, z, margin):
+    """Whether a point may lie within ``margin`` of a moving body (see :func:`_far_from`)."""
+    for b in range(bodies.shape[0]):
+        if not _far_from(bodies[b], x, y, z, margin):
+            return True
+    return False
+
+
+@numba.njit(**JIT)
+def _anchors(q, hold_kind, held, bodies, planes, plane_friction, margin, anchor):
+    """
+    Mark the points no sweep moves: held by a grip or a pin, or pressed by a body (_held).
+
+    ``anchor[:, r, c]``: the point's own row and column if it is one, else -1. Decides
+    :func:`_held` (into ``held``) for the points near a body only; returns how many there
+    are.
+    """
+    rows, cols = hold_kind.shape
+    pressing = bodies.shape[0] > 0 and planes.shape[0] > 0
+    count = 0
+    for r in range(rows):
+        for c in range(cols):
+            fixed = hold_kind[r, c] != FREE
+            if not fixed and pressing and \
+                    _near_a_body(bodies, q[0, r, c], q[1, r, c], q[2, r, c], margin):
+                fixed = _held_once(q, r, c, held, bodies, planes, plane_friction, margin)
+            anchor[0, r, c], anchor[1, r, c] = (r, c) if fixed else (-1, -1)
+            count += fixed
+    return count
+
+
+@numba.njit(**JIT)
+def _nearest_anchors(anchor, row_step, col_step, squared):
+    """
+    Give each point an anchor near it and their squared distance at rest (``squared``, m^2).
+
+    Danielsson's vector propagation (a point takes the anchor of a neighbour already passed
+    if that one is nearer to it at rest): down the rows, each row from its left taking the
+    anchors of the row above and its left neighbour, then from its right taking its right
+    neighbour's; then up the rows the other way round. The nearest anchor for nearly every
+    point, a near one for the rest; any anchor bounds the distance (see :func:`_tether`).
+    ``anchor`` (row and column) holds the anchors' own and -1 elsewhere on entry; points
+    with none keep -1.
+    """
+    rows, cols = anchor.shape[1], anchor.shape[2]
+    for r in range(rows):
+        for c in range(cols):
+            squared[r, c] = 0.0 if anchor[0, r, c] >= 0 else np.inf
+    for i in range(2 * rows):
+        up = i >= rows                  # the second pass, from the last row
+        r = 2 * rows - 1 - i if up else i
+        r_before = r + 1 if up else r - 1
+        for c in range(cols):
+            # the row passed before (three neighbours), then the left neighbour
+            for k in range(4):
+                r2, c2 = (r_before, c + k - 1) if k < 3 else (r, c - 1)
+                if r2 < 0 or r2 >= rows or c2 < 0 or c2 >= cols or anchor[0, r2, c2] < 0:
+                    continue
+                ar, ac = anchor[0, r2, c2], anchor[1, r2, c2]
+                d2 = ((r - ar) * row_step) ** 2 + ((c - ac) * col_step) ** 2
+                if d2 < squared[r, c]:
+                    squared[r, c] = d2
+                    anchor[0, r, c], anchor[1, r, c] = ar, ac
+        for c in range(cols - 2, -1, -1):
+            if anchor[0, r, c + 1] < 0:
+                continue
+            ar, ac = anchor[0, r, c + 1], anchor[1, r, c + 1]
+            d2 = ((r - ar) * row_step) ** 2 + ((c - ac) * col_step) ** 2
+            if d2 < squared[r, c]:
+                squared[r, c] = d2
+                anchor[0, r, c], anchor[1, r, c] = ar, ac
+
+
+@numba.njit(**JIT)
+def _tether(q, qd, dv, anchor, squared, planes, boxes, spheres, bodies, margin, stretch,
+            tolerance, h):
+    """
+    Pull each point no farther from its anchor than ``1 + stretch`` times their rest distance.
+
+    A point farther than that (by over ``tolerance``, relative) moves towards its anchor
+    along the surfaces it lies on (:func:`_kept`), the anchor stays; returns how many
+    moved. The springs within their limit keep the points within it too, along a row, a
+    column or a diagonal of the grid; between those directions the springs allow more (a
+    uniform stretch at 63 degrees to the rows reaches 11.1 % with none over 10 %, more
+    where the cloth is also compressed across it), so a tether is tighter there. One pass
+    does what the sweeps take hundreds for: a cloth dragged by a finger lies at its strain
+    limit behind it, and the finger's pull crosses the sheet one spring a sweep
+    (long-range attachments, Kim, Chentanez and Mueller 2012).
+    """
+    rows, cols = anchor.shape[1], anchor.shape[2]
+    moved = 0
+    for r in range(rows):
+        for c in range(cols):
+            ar, ac = anchor[0, r, c], anchor[1, r, c]
+            if ar < 0 or squared[r, c] == 0.0:
+                continue
+            dx, dy, dz = q[0, ar, ac] - q[0, r, c], q[1, ar, ac] - q[1, r, c], \
+                q[2, ar, ac] - q[2, r, c]
+            length2 = dx * dx + dy * dy + dz * dz
+            # squared: the roots only for the points pulled (a few in a hundred)
+            bound = (1.0 + stretch) * (1.0 + tolerance)
+            if not length2 > bound * bound * squared[r, c]:
+                continue
+            length = math.sqrt(length2)
+            limit = (1.0 + stretch) * math.sqrt(squared[r, c])
+            ux, uy, uz = dx / length, dy / length, dz / length
+            mx, my, mz = _kept(q, r, c, ux, uy, uz, planes, boxes, spheres, bodies, margin)
+            rate = mx * ux + my * uy + mz * uz
+            if rate < SMALLEST_RATE:
+                continue
+            _shift(q, qd, dv, r, c, (length - limit) / rate, mx, my, mz, h)
+            moved += 1
+    return moved
+
+
+@numba.njit(**JIT)
+def _pull_to_anchors(q, qd, dv, rest, hold_kind, held, planes, boxes, spheres, bodies, margin,
+                     plane_friction, stretch, tolerance, h):
+    """Tether every point to an anchor near it (:func:`_tether`); returns how many moved."""
+    rows, cols = hold_kind.shape
+    anchor = np.empty((2, rows, cols), dtype=np.int64)
+    if not _anchors(q, hold_kind, held, bodies, planes, plane_friction, margin, anchor):
+        return 0
+    squared = np.empty((rows, cols))
+    _nearest_anchors(anchor, rest[2], rest[0], squared)
+    return _tether(q, qd, dv, anchor, squared, planes, boxes, spheres, bodies, margin,
+                   stretch, tolerance, h)
+
+
+@numba.njit(**JIT)
 def tangent_strain_limit(q, qd, dv, rest, hold_kind, planes, boxes, spheres, bodies, margin,
-                         plane_friction, max_stretch, max_sweeps, tolerance, h, relaxation):
+                         plane_friction, max_stretch, max_sweeps, tolerance, h, relaxation,
+                         tethers):
     """
     Limit the springs of a level to ``(1 + max_stretch)`` times their rest length.
 
@@ -260,6 +401,16 @@ def tangent_strain_limit(q, qd, dv, rest, hold_kind, planes, boxes, spheres, bod
     once nothing else moves). On the 129 x 129 table drop a step's call ran 187
     sweeps, thousands of corrections in 30-40 of 81 blocks of 16 x 16 cells for the first
     hundred, a few in a few blocks after.
+
+    ``tethers``: when the sweeps have not settled after ``TETHER_AFTER`` and the level has
+    held points (a grip or a pin, or a point a body presses into a plane), every point is
+    pulled within the limit of an anchor near it at rest (:func:`_pull_to_anchors`), and
+    the next sweep looks at every spring. Behind the contact bench's finger at 257 x 257
+    the dragged cloth lies at its limit and the sweeps passed the finger's pull on one
+    spring a sweep: 300 (the cap) at the median, 3.7 calls a step, 48.5 ms; tethered, 2.0
+    calls a step, 11.9 ms (``tools/finger_profile.py --size 257``). A call that settles within
+    ``TETHER_AFTER`` sweeps never pays for the anchors (a pass over the level and the two
+    of :func:`_nearest_anchors`).
     """
     rows, cols = hold_kind.shape
     runs = (cols + RUN - 1) // RUN
@@ -270,7 +421,12 @@ def tangent_strain_limit(q, qd, dv, rest, hold_kind, planes, boxes, spheres, bod
     # point a spring over its limit asks about (:func:`_held_once`)
     pressing = bodies.shape[0] > 0 and planes.shape[0] > 0
     held = np.zeros((rows, cols), dtype=np.int8)
-    for _ in range(max_sweeps):
+    tethers = tethers and (pressing or np.any(hold_kind != FREE))
+    for sweep in range(max_sweeps):
+        if tethers and sweep == TETHER_AFTER and _pull_to_anchors(
+                q, qd, dv, rest, hold_kind, held, planes, boxes, spheres, bodies, margin,
+                plane_friction, max_stretch, tolerance, h):
+            now[:, :] = True
         over = False
         for r in range(rows):
             for run in range(runs):
