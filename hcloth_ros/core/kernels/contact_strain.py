@@ -15,9 +15,10 @@ limit (position-based projection with the gradients restricted to those planes).
 Gauss-Seidel over the structural and shear springs (stencil directions 0, 2, 4, 6), row
 by row: each correction is seen by the next spring, so a correction travels along a flap
 within one sweep instead of one point a sweep. Against the sweeps' order it still travels
-one spring a sweep; where held points pull a whole sheet (a finger dragging the cloth)
-the points are first tethered to them (:func:`_tether`). Velocities and the step's velocity change
-take each move divided by ``h``, as :mod:`~hcloth_ros.core.kernels.strain` does.
+one spring a sweep: where held points pull a whole sheet (a finger dragging the cloth)
+and the sweeps do not settle, the points are tethered to them (:func:`_tether`).
+Velocities and the step's velocity change take each move divided by ``h``, as
+:mod:`~hcloth_ros.core.kernels.strain` does.
 """
 
 import math
@@ -42,7 +43,8 @@ FREE_RATE = 0.9
 # Columns of a row a sweep skips or looks at together (see tangent_strain_limit).
 RUN = 16
 # Sweeps before the points are tethered to the held ones (see tangent_strain_limit): on
-# the contact bench's finger at 257 x 257 46 ms a step with 8 or 16, 58 with 0 or 32.
+# the contact bench's finger at 257 x 257 46 ms a step with 8 or 16, 58 with 0 or 32 (one
+# run each, with two scans of the anchors' propagation instead of the four it has).
 TETHER_AFTER = 8
 # The spring directions limited: right, down, down-right, down-left.
 DIRECTIONS = np.array([0, 2, 4, 6])
