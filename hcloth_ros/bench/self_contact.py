@@ -22,10 +22,11 @@ for each ``--intervals`` n:
 Prints, per scene and setting, the median and p90 over the steps of the self-contact
 kernel's time in a step (its calls summed, 0 on steps without a check), the whole step's
 median, the most pairs one check found and the largest finest strain of the run, and the
-kernel's median over the steps whose check found pairs (the layers in contact: in the
-folded drop's 60 steps they touch in a few steps after the start and at the landing,
-and lie apart in most), with the thread count and the load average. The kernel is serial: one thread whatever
-``NUMBA_NUM_THREADS`` says; the rest of the step follows it.
+kernel's median over the steps whose check found pairs (the layers in contact: at 129 x
+129 the folded drop's layers touch at steps 3-5, land at 26-33 and slide over each other
+from 48 on, and lie apart in between), with the thread count and the load average. The
+kernel is serial: one thread whatever ``NUMBA_NUM_THREADS`` says; the rest of the step
+follows it.
 """
 
 import argparse
