@@ -89,6 +89,29 @@ def test_points_inside_a_body_end_on_its_grown_surface(shape, size):
     assert np.abs(qd).max() < 1e-12     # at rest: no velocity given
 
 
+def test_a_point_in_a_grown_box_s_corner_is_pushed_out():
+    """
+    A point inside a box grown by the margin, at a corner: pushed out like any other.
+
+    The grown box's corner lies farther from its centre than the half diagonal plus the
+    margin, the sphere body_contact skipped points beyond until 2026-11-28: a point
+    there stayed inside.
+    """
+    half = np.array([0.1, 0.1, 0.1])
+    bodies = MovingBodies()
+    bodies.add('b', 'box', half.tolist())
+    bodies.set_pose('b', np.eye(3), (0.0, 0.0, 0.0))
+    corner = half + 0.9 * MARGIN
+    assert np.linalg.norm(corner) > np.linalg.norm(half) + MARGIN
+    q = corner.reshape(3, 1, 1).copy()
+    q_start = q.copy()
+    qd, dv = np.zeros_like(q), np.zeros_like(q)
+    pushes = body_contact(q, qd, dv, q_start, np.zeros((1, 1), np.int8), False,
+                          bodies.packed(), MARGIN, DT, DT, np.zeros((0, 4)), 0.0)
+    assert pushes == 1
+    assert np.max(np.abs(q[:, 0, 0]) - half) >= MARGIN - 1e-12     # on the grown surface
+
+
 @pytest.mark.parametrize('solver', ['multigrid', 'hierarchical', 'approx'])
 def test_a_tray_carries_the_cloth_by_coulomb_friction(solver):
     """

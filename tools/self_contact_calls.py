@@ -36,7 +36,7 @@ def main(argv=None):
                         help="the contact rounds' strain limiting (default: the solver's)")
     args = parser.parse_args(argv)
     numba.set_num_threads(1)
-    from hcloth_ros.bench.self_contact import scene_setup
+    from hcloth_ros.bench.self_contact import in_contact, scene_setup
     from hcloth_ros.core import make_solver
     model, state, control = scene_setup(args.size, 'folded')
     options = {} if args.contact_strain is None else {'contact_strain': args.contact_strain}
@@ -78,8 +78,8 @@ def main(argv=None):
           f'{np.mean([len(step) for step in calls]):.2f} calls a step')
     # the steps with layers in contact: those whose first detection found a pair (the
     # medians above also hold the steps where the layers are apart: falling, or opened)
-    touching = [total for total, step in zip(totals, calls) if step and step[0][1] > 0]
-    if touching:
+    touching = in_contact(totals, [step[0][1] if step else 0 for step in calls])
+    if len(touching):
         print(f'the {len(touching)} steps whose first detection found pairs: kernel a step '
               f'median {np.median(touching):.2f} ms, mean {np.mean(touching):.2f} ms, '
               f'90th percentile {np.percentile(touching, 90):.2f} ms')

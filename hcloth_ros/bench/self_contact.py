@@ -148,26 +148,26 @@ def run(n, scene, steps, thickness, interval, rounds=16, extra=None):
         pairs.append(report.extra.get('self_contact_pairs', 0))
         strain = max(strain, report.max_strain)
     ms = np.array(kernel) * 1e3
-    touching, touching_median = in_contact(ms, pairs[1:])
+    touching = in_contact(ms, pairs[1:])
     return {'n': n, 'scene': scene, 'interval': interval, 'contact_rounds': rounds,
             'kernel_median_ms': float(np.median(ms)),
             'kernel_p90_ms': float(np.percentile(ms, 90)),
-            'touching_steps': touching, 'kernel_touching_median_ms': touching_median,
+            'touching_steps': len(touching),
+            'kernel_touching_median_ms': float(np.median(touching)) if len(touching) else None,
             'step_median_ms': float(np.median(totals) * 1e3), 'pairs_max': int(max(pairs)),
             'max_strain': float(strain), 'refused': refused}
 
 
 def in_contact(kernel_ms, pairs):
     """
-    Return how many steps found pairs and the kernel's median over them (None: none did).
+    Return the kernel's times of the steps whose check found pairs.
 
     ``kernel_ms`` and ``pairs``: per step (a refused last step has a time and no pairs).
     The steps with pairs are those with the layers in contact: the medians over all steps
     hold the steps where they lie apart, most of the folded drop's.
     """
     found = np.asarray(pairs[:len(kernel_ms)]) > 0
-    touching = np.asarray(kernel_ms)[:len(found)][found]
-    return int(found.sum()), float(np.median(touching)) if len(touching) else None
+    return np.asarray(kernel_ms, dtype=float)[:len(found)][found]
 
 
 def _line(r):

@@ -116,10 +116,10 @@ class Solver:
     :param contact_relaxation: tangent strain limiting moves the springs whose ends may move
         along them this many times their correction (in [1, 2); 1: plain Gauss-Seidel;
         :func:`~hcloth_ros.core.kernels.contact_strain.tangent_strain_limit`).
-    :param contact_tethers: tangent strain limiting first pulls each point no farther from
-        the nearest held point (a grip, a pin, a point a body presses into a plane) than
-        the strain limit allows at their rest distance
-        (:func:`~hcloth_ros.core.kernels.contact_strain._tether`).
+    :param contact_tethers: when tangent strain limiting's sweeps have not settled after a
+        few, pull each point no farther from the nearest held point (a grip, a pin, a
+        point a body presses into a plane) than the strain limit allows at their rest
+        distance (:func:`~hcloth_ros.core.kernels.contact_strain._tether`).
     """
 
     name = ''

@@ -69,6 +69,22 @@ def _reach(b):
 
 
 @numba.njit(**JIT)
+def _grown_reach(b, grow):
+    """
+    Radius of a sphere around the body's origin that holds the body grown by ``grow``.
+
+    A box grows along each axis, so its corners move out by ``grow`` in all three: the
+    half diagonal plus ``grow`` left points inside the grown box near its corners out
+    (1.4 mm at the tests' table with a 2 mm margin); a sphere or a capsule grows along
+    its normal.
+    """
+    if int(b[KIND]) == BOX:
+        return math.sqrt((b[SIZE] + grow) ** 2 + (b[SIZE + 1] + grow) ** 2
+                         + (b[SIZE + 2] + grow) ** 2)
+    return _reach(b) + grow
+
+
+@numba.njit(**JIT)
 def _off_core(b, x, y, z):
     """Return a local point minus the nearest point of a round body's core (centre, axis)."""
     if int(b[KIND]) == CAPSULE:
@@ -384,7 +400,7 @@ def body_contact(
     pushes = 0
     for i in range(bodies.shape[0]):
         b = bodies[i]
-        reach = _reach(b) + margin
+        reach = _grown_reach(b, margin)
         for r in range(rows):
             for c in range(cols):
                 if not _movable(hold_kind, inherited_fixed, r, c):
