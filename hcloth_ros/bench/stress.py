@@ -522,7 +522,9 @@ def main(argv=None):
     parser.add_argument('--short', action='store_true',
                         help=f'the mode of the test suite: {SHORT["seconds"]:g} s phases, '
                              f'{SHORT["starts"]} starts, {SHORT["kills"]} kill')
-    parser.add_argument('--seconds', type=float, help='per phase (default 60, --short 4)')
+    parser.add_argument('--seconds', type=float,
+                        help=f'per phase (default {LONG["seconds"]:g}, '
+                             f'--short {SHORT["seconds"]:g})')
     parser.add_argument('--rate', type=float, default=10000.0,
                         help='flood messages a second in total (default 10000)')
     parser.add_argument('--starts', type=int, help='signal phase (default 100, --short 4)')

@@ -1,0 +1,125 @@
+"""
+Self-contact's kernel calls of the folded drop captured, then replayed alone: time and result.
+
+    .venv/bin/python tools/self_contact_replay.py [--size 129] [--steps 61:100] \
+        [--repeats 3] [--save FILE | --load FILE]
+
+Runs the contact bench's folded drop (``multigrid``, thickness 4 mm, one numba thread),
+keeps a copy of every argument of each finest-level kernel call in the steps asked for
+(numbered from 1, both ends included; steps 61-100 at 129 x 129: the layers slide over
+each other as the fold opens, every call finding pairs or checking the points strain
+limiting moved), then runs each call again ``--repeats`` times on fresh copies and keeps
+its fastest. Prints the time of the
+calls in all, the median and mean of a step's calls, the same for the steps' first calls
+and for their later ones, and a digest of what the calls wrote (positions, velocities,
+velocity changes): a change to the kernel that gives the same digest gave the same
+result on every call. The steps' work is the same for every version of the kernel,
+where ``tools/self_contact_calls.py`` follows each version's own motion (a different bit
+in a chaotic drop changes which steps are in contact, and so the medians). ``--save``
+writes the captured calls (about 3 MB a call at 129 x 129) for another version to
+``--load``: run the tool with ``PYTHONPATH`` pointing at each version's tree.
+"""
+
+import argparse
+import hashlib
+import importlib
+import pickle
+import time
+
+import numba
+import numpy as np
+
+
+def capture(size, first, last):
+    """Return ``[(step, arguments)]`` of the finest level's kernel calls in steps first..last."""
+    from hcloth_ros.bench.self_contact import scene_setup
+    from hcloth_ros.core import make_solver
+    model, state, control = scene_setup(size, 'folded')
+    solver = make_solver('multigrid', model, thickness=0.004)
+    finest = model.level_count - 1
+    kit = solver.kernels(finest)
+    calls, now = [], [0]
+
+    def kept(*arguments):
+        if first <= now[0] <= last:
+            calls.append((now[0], [a.copy() if isinstance(a, np.ndarray) else a
+                                   for a in arguments]))
+        return kit.self_contact(*arguments)
+
+    class Capturing:
+
+        def __getattr__(self, name):
+            return kept if name == 'self_contact' else getattr(kit, name)
+
+    solver._kits[finest] = Capturing()
+    for step in range(1, last + 1):
+        now[0] = step
+        solver.step(state, control, 1 / 60)
+        print(f'\rstep {step} of {last}, {len(calls)} calls kept', end='', flush=True)
+    print()
+    return calls
+
+
+def replay(calls, repeats):
+    """Run each call ``repeats`` times; return its fastest times and the outputs' digest."""
+    kernel = importlib.import_module('hcloth_ros.core.kernels.self_contact').self_contact
+    digest = hashlib.sha1()
+    best = []
+    for _, arguments in calls:
+        times = []
+        for _ in range(repeats):
+            copies = [a.copy() if isinstance(a, np.ndarray) else a for a in arguments]
+            start = time.perf_counter()
+            kernel(*copies)
+            times.append(time.perf_counter() - start)
+        best.append(min(times))
+        for written in copies[:3]:      # q, qd, dv
+            digest.update(written.tobytes())
+    return np.array(best), digest.hexdigest()[:12]
+
+
+def per_step(calls, seconds, which):
+    """Sum ``seconds`` by step over the calls ``which`` selects (first or later calls)."""
+    totals = {}
+    for (step, arguments), t in zip(calls, seconds):
+        later = arguments[-1]       # the kernel's reuse flag: set on a step's later calls
+        if which is None or which == later:
+            totals[step] = totals.get(step, 0.0) + t
+    return np.array(list(totals.values()))
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
+    parser.add_argument('--size', type=int, default=129)
+    parser.add_argument('--steps', default='61:100', help='first:last, from 1, both included')
+    parser.add_argument('--repeats', type=int, default=3)
+    store = parser.add_mutually_exclusive_group()
+    store.add_argument('--save', help='write the captured calls to this file')
+    store.add_argument('--load', help='replay the calls of this file instead of capturing')
+    args = parser.parse_args(argv)
+    numba.set_num_threads(1)
+    if args.load:
+        with open(args.load, 'rb') as f:
+            calls = pickle.load(f)
+    else:
+        first, last = (int(v) for v in args.steps.split(':'))
+        calls = capture(args.size, first, last)
+        if args.save:
+            with open(args.save, 'wb') as f:
+                pickle.dump(calls, f)
+    if not calls:
+        raise SystemExit('no kernel calls in those steps')
+    replay(calls[:1], 1)        # compiled or loaded before the timing
+    seconds, digest = replay(calls, args.repeats)
+    print(f'{len(calls)} calls in {len(per_step(calls, seconds, None))} steps, '
+          f'{1e3 * seconds.sum():.1f} ms in all (fastest of {args.repeats} each); '
+          f'digest {digest}')
+    for label, which in (('all calls', None), ('first calls', False), ('later calls', True)):
+        totals = 1e3 * per_step(calls, seconds, which)
+        if len(totals):
+            print(f'  {label}: a step median {np.median(totals):.2f} ms, '
+                  f'mean {totals.mean():.2f} ms')
+
+
+if __name__ == '__main__':
+    main()
