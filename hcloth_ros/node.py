@@ -67,6 +67,7 @@ from hcloth_ros import lifetime, memory, params
 from hcloth_ros.core import kernels_cached, warm_up
 from hcloth_ros.core.blas import limit_openblas_threads
 from hcloth_ros.core.control import PINNED
+from hcloth_ros.core.self_contact import thickness_warning
 from hcloth_ros.core.solvers import HierarchicalSolver
 from hcloth_ros.diagnostics import node_status
 from hcloth_ros.governor import finest_to_simulate, Governor
@@ -139,6 +140,7 @@ class ClothSimNode(Node):
         self.model, self.solver, self.state, self.control = \
             self.sim.model, self.sim.solver, self.sim.state, self.sim.control
         self.obstacles = self.sim.obstacles
+        self._warn_thick_self_contact()
         # multi-level solvers simulate levels on demand and publish any level of detail
         self._levelled = isinstance(self.solver, HierarchicalSolver)
         self.frame_id = self.get_parameter('frame_id').value
@@ -196,6 +198,14 @@ class ClothSimNode(Node):
             f'tick, {self._pace()}')
 
     # --- start-up ----------------------------------------------------------------------
+    def _warn_thick_self_contact(self):
+        """Log (and return) a warning if self-contact is thicker than the finest spacing."""
+        contact = self.solver.self_contact
+        text = thickness_warning(self.model, contact.thickness) if contact else None
+        if text:
+            self.get_logger().warning(text)
+        return text
+
     def _check_overrides(self):
         """
         Refuse to start on a disallowed value (one line each); integers become floats.

@@ -491,3 +491,22 @@ def test_array_parameters_change_through_the_parameter_service(graph):
     assert isinstance(sim.get_parameter('scene.spheres').value, array.array)
     assert list(sim.get_parameter('scene.spheres').value) == [0.0, 0.0, 0.0, 1.0]
     assert sim.model.scene.spheres.shape == (1, 4)
+
+
+def test_a_self_contact_thicker_than_the_finest_spacing_is_warned_of_at_start():
+    # 10 cm over the default 65 x 65 points: 1.6 mm a spacing, under the 4 mm thickness
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    try:
+        sim = ClothSimNode(context=context, parameter_overrides=[
+            Parameter('cloth.width', value=0.1), Parameter('cloth.height', value=0.1),
+            Parameter('self_contact.thickness', value=0.004)])
+        assert 'is not below the finest grid spacing 0.00156 m' in \
+            sim._warn_thick_self_contact()
+        sim.destroy_node()
+        sim = ClothSimNode(context=context, parameter_overrides=[
+            Parameter('self_contact.thickness', value=0.004)])
+        assert sim._warn_thick_self_contact() is None        # 15.6 mm a spacing
+        sim.destroy_node()
+    finally:
+        rclpy.shutdown(context=context)

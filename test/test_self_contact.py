@@ -938,3 +938,26 @@ def test_the_contact_bench_reports_the_kernel_over_the_steps_in_contact():
     result = run(17, 'folded', 40, 0.004, 1)
     assert 0 < result['touching_steps'] < 40
     assert result['kernel_touching_median_ms'] > 0.0
+
+
+def test_a_thickness_not_below_the_finest_spacing_is_named_with_the_spacing():
+    """
+    The kernel assumes the thickness is below the finest spacing (thickness_warning).
+
+    1 m over 129 x 129 points is 7.8 mm a spacing: the contact bench's 4 mm passes, 8 mm
+    does not, and neither does 4 mm on 257 x 257 (3.9 mm, where the folded drops tangled).
+    """
+    from hcloth_ros.core.self_contact import thickness_warning
+    fine = ClothBuilder(resolution=(9, 9), level_count=5).finalize()      # 129 x 129
+    finer = ClothBuilder(resolution=(9, 9), level_count=6).finalize()     # 257 x 257
+    assert thickness_warning(fine, 0.004) is None
+    assert thickness_warning(fine, None) is None
+    assert thickness_warning(fine, 0.0078) is None          # just below 1 / 128 m
+    text = thickness_warning(fine, 0.008)
+    assert text.startswith('self_contact.thickness 0.008 m is not below the finest grid '
+                           'spacing 0.00781 m (129 x 129 points on 1 x 1 m)')
+    assert 'under about half the spacing (0.0039 m)' in text
+    assert 'spacing 0.00391 m (257 x 257' in thickness_warning(finer, 0.004)
+    # the narrower side's spacing counts
+    narrow = ClothBuilder(width=1.0, height=0.25, resolution=(9, 9), level_count=5).finalize()
+    assert 'spacing 0.00195 m' in thickness_warning(narrow, 0.004)

@@ -36,6 +36,7 @@ import time
 
 from hcloth_ros.bench.scenarios import build_model, prepare
 from hcloth_ros.core import Control, make_scene, make_solver, State
+from hcloth_ros.core.self_contact import thickness_warning
 from hcloth_ros.params import assignments
 import numba
 import numpy as np
@@ -209,6 +210,10 @@ def main(argv=None):
     settings = [None] + [int(s) for s in args.intervals.split(',')]
     results = []
     for n in (int(s) for s in args.sizes.split(',')):
+        # the 257 x 257 rows' 4 mm is about their spacing: said above their figures
+        warning = thickness_warning(scene_setup(n, 'swing')[0], args.thickness)
+        if warning:
+            print(f'{n} x {n}: {warning}', flush=True)
         for scene in ('swing', 'folded'):
             for interval in settings:
                 results.append(run(n, scene, args.steps, args.thickness, interval,
