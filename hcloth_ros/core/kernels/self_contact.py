@@ -34,8 +34,14 @@ they end so. A point passing through a triangle is what a surface's passing thro
 another's inside looks like; at the other's border it can pass with no point doing so (a
 corner hooked round another layer's edge, both layers' edges lying over each other): the
 edges are what cross there, and such tangles stretched the perturbed folded drops'
-springs to 9 times their rest length (``tools/folded_seeds.py``). Two edges crossing
-away from the border (an edge hooked over another layer's sharp crease) are not tested.
+springs to 9 times their rest length (``tools/folded_seeds.py``). Away from the border
+two layers can pass through each other in the same way only where both are creased: an
+edge's ends stay a thickness clear of a layer it passes under only if that layer drops
+by a thickness within half an edge of its crease. So the creases (edges between two
+triangles whose normals part by more than ``2 asin(2 thickness / longest edge)``) are
+tested against the other patch's edges in every pair of patches, as the free edges are
+(a cloth folded twice, its second fold across the first, tangled at their crossing
+without it).
 
 Response (at the end positions; rounds of detection, each followed by ``RESOLVE_PASSES``
 Gauss-Seidel passes over its pairs, until a detection finds none, the last round moving
@@ -881,20 +887,23 @@ def _segment_box(x0, x1, a, b, shift, reach, out):
 
 @numba.njit(**JIT)
 def _edge_against(x0, x1, rows, cols, thickness, substeps, subs, shift, e, bi, bj, fresh,
-                  fresh_blocks, pairs, sides, count, boxes, b_boxes):
+                  fresh_blocks, pairs, sides, count, boxes, b_boxes, crease):
     """
-    Test free edge e against the edges of patch B; returns the new pair count.
+    Test edge e, free or a crease, against the edges of patch B; returns the new pair count.
 
     B's edges: each cell's edge along its first row, down its first column and its
     diagonal, and along the grid's last row and column those of its cells there. Edges
     with an end within ``RING`` rows and columns of one of e's are skipped (the cloth's
-    own surface), and so are pairs of two free edges but once (e the lower index). Only
-    pairs with an end marked in ``fresh`` are tested (``fresh_blocks``: the blocks with
-    one, see :func:`_fresh_blocks`). ``boxes``: room for two boxes (6 numbers each);
+    own surface), and each pair is tested once: of two free edges, from the lower index;
+    a free edge and another, from the free edge; of two creases (``crease``: the flags of
+    :func:`_patch_creases`, e one of them unless it is free), from the lower index.
+    Only pairs with an end marked in ``fresh`` are tested (``fresh_blocks``: the blocks
+    with one, see :func:`_fresh_blocks`). ``boxes``: room for two boxes (6 numbers each);
     ``b_boxes``: the boxes B's blocks sweep in the frame moving by ``shift``, in row-major
     order (:func:`_moving_box`).
     """
     a, b = _edge(e, cols)
+    free = _on_border(a, b, rows, cols)
     moved = fresh[a] or fresh[b]
     ra0, ra1 = min(a // cols, b // cols), max(a // cols, b // cols)
     ca0, ca1 = min(a % cols, b % cols), max(a % cols, b % cols)
@@ -926,8 +935,11 @@ def _edge_against(x0, x1, rows, cols, thickness, substeps, subs, shift, e, bi, b
                                 ca0 - RING <= max(c % cols, dd % cols) and \
                                 min(c % cols, dd % cols) <= ca1 + RING:
                             continue
-                        if f < e and _on_border(c, dd, rows, cols):
-                            continue        # found as e's partner when f was tested
+                        if _on_border(c, dd, rows, cols):
+                            if not free or f < e:
+                                continue    # found as e's partner when f was tested
+                        elif not free and f < e and crease[f]:
+                            continue        # the same
                         _segment_box(x0, x1, c, dd, shift, 0.0, other)
                         if not _overlap(box, other):
                             continue
@@ -942,7 +954,7 @@ def _edge_against(x0, x1, rows, cols, thickness, substeps, subs, shift, e, bi, b
 
 @numba.njit(**JIT)
 def _free_edges_against(x0, x1, rows, cols, thickness, substeps, subs, shift, ai, aj, bi,
-                        bj, fresh, fresh_blocks, dirty, pairs, sides, count):
+                        bj, fresh, fresh_blocks, dirty, pairs, sides, count, crease):
     """
     Test patch A's edges on the grid's border against patch B's edges (see _edge_against).
 
@@ -964,7 +976,7 @@ def _free_edges_against(x0, x1, rows, cols, thickness, substeps, subs, shift, ai
                 if dirty[bi, bj] or fresh[a] or fresh[b]:
                     count = _edge_against(x0, x1, rows, cols, thickness, substeps, subs,
                                           shift, e, bi, bj, fresh, fresh_blocks, pairs,
-                                          sides, count, boxes, b_boxes)
+                                          sides, count, boxes, b_boxes, crease)
         if side == 2 and c0 == 0 or side == 3 and c1 == cols - 1:
             col = 0 if side == 2 else cols - 1
             for r in range(r0, r1):
@@ -973,8 +985,103 @@ def _free_edges_against(x0, x1, rows, cols, thickness, substeps, subs, shift, ai
                 if dirty[bi, bj] or fresh[a] or fresh[b]:
                     count = _edge_against(x0, x1, rows, cols, thickness, substeps, subs,
                                           shift, e, bi, bj, fresh, fresh_blocks, pairs,
-                                          sides, count, boxes, b_boxes)
+                                          sides, count, boxes, b_boxes, crease)
     return count
+
+
+@numba.njit(**JIT)
+def _crease_edges_against(x0, x1, rows, cols, thickness, substeps, subs, shift, ai, aj, bi,
+                          bj, fresh, fresh_blocks, dirty, pairs, sides, count, crease):
+    """
+    Test patch A's creases against patch B's edges (see _edge_against and _patch_creases).
+
+    Away from the border, two layers folded sharply can hook over each other's crease
+    with no point passing through or coming near a triangle (a cloth folded twice, where
+    the second fold crosses the first, tangled so at 65 x 65). An edge with no end marked
+    in ``fresh`` is tested only if B has a block marked in ``fresh_blocks`` (``dirty``).
+    """
+    boxes = np.empty((2, 6))
+    b_boxes = np.empty(((PATCH // SUB) ** 2, 6))
+    have = False
+    for r in range(ai * PATCH, min((ai + 1) * PATCH, rows - 1)):
+        for c in range(aj * PATCH, min((aj + 1) * PATCH, cols - 1)):
+            v = r * cols + c
+            for d in range(3):
+                e = 3 * v + d
+                if not crease[e]:
+                    continue
+                a, b = _edge(e, cols)
+                if not (dirty[bi, bj] or fresh[a] or fresh[b]):
+                    continue
+                if not have:        # B's blocks' boxes in the pair's frame, once
+                    _patch_block_boxes(subs, bi, bj, shift, b_boxes)
+                    have = True
+                count = _edge_against(x0, x1, rows, cols, thickness, substeps, subs, shift,
+                                      e, bi, bj, fresh, fresh_blocks, pairs, sides, count,
+                                      boxes, b_boxes, crease)
+    return count
+
+
+@numba.njit(**JIT)
+def _triangle_normal(x, t, cols):
+    """Return triangle t's normal, twice its area long (the vertices' order of _triangle)."""
+    i, j, k = _triangle(t, cols)
+    ex, ey, ez = x[0, j] - x[0, i], x[1, j] - x[1, i], x[2, j] - x[2, i]
+    fx, fy, fz = x[0, k] - x[0, i], x[1, k] - x[1, i], x[2, k] - x[2, i]
+    return ey * fz - ez * fy, ez * fx - ex * fz, ex * fy - ey * fx
+
+
+@numba.njit(**JIT)
+def _patch_creases(x, rows, cols, bi, bj, cosine, bit, crease, normals):
+    """
+    Set ``bit`` in ``crease`` at patch (bi, bj)'s creases in positions ``x``.
+
+    ``crease`` holds 3 flags a point, as :func:`_edge` numbers edges. A crease: an edge
+    between two triangles whose normals part by more than ``acos(cosine)`` (a degenerate
+    triangle makes its edges creases); the bit is cleared at the others. An edge of a
+    cloth bent less than that cannot pass through another layer unseen by the
+    point-triangle tests (see :func:`self_contact`). Edges on the grid's border are free
+    edges, never creases. Each triangle's normal is computed once, for the patch's cells
+    and the row above and the column on the left (whose triangles its first row's and
+    column's edges share), into ``normals`` (room for ``PATCH + 1`` by ``PATCH + 1``
+    cells' two), with its squared length; the angles are compared without a square root.
+    """
+    r0, r1 = bi * PATCH, min((bi + 1) * PATCH, rows - 1)
+    c0, c1 = bj * PATCH, min((bj + 1) * PATCH, cols - 1)
+    lo_r, lo_c = max(r0 - 1, 0), max(c0 - 1, 0)
+    # normals[cell row, cell column, triangle, (xyz, squared length)]
+    for r in range(lo_r, r1):
+        for c in range(lo_c, c1):
+            t = 2 * (r * (cols - 1) + c)
+            for half in range(2):
+                out = normals[r - lo_r, c - lo_c, half]
+                out[0], out[1], out[2] = _triangle_normal(x, t + half, cols)
+                out[3] = out[0] * out[0] + out[1] * out[1] + out[2] * out[2]
+    keep = ~np.uint8(bit)
+    square = cosine * cosine
+    for r in range(r0, r1):
+        for c in range(c0, c1):
+            v = r * cols + c
+            u, w = r - lo_r, c - lo_c
+            # along the row: the cell above's second triangle and this one's first; down
+            # the column: the cell on the left's first and this one's second; the
+            # diagonal: this cell's two
+            for d, ua, wa, ha, hb, inside in ((0, u - 1, w, 1, 0, r > 0),
+                                              (1, u, w - 1, 0, 1, c > 0),
+                                              (2, u, w, 0, 1, True)):
+                bent = False
+                if inside:
+                    a, b = normals[ua, wa, ha], normals[u, w, hb]
+                    dot = a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+                    both = a[3] * b[3]
+                    # dot > cosine |a| |b|, squared on the side of cosine's sign
+                    if cosine >= 0.0:
+                        apart = dot > 0.0 and dot * dot > square * both
+                    else:
+                        apart = dot >= 0.0 or dot * dot < square * both
+                    bent = not (apart and both > 0.0)
+                flag = np.uint8(bit) if bent else np.uint8(0)
+                crease[3 * v + d] = (crease[3 * v + d] & keep) | flag
 
 
 @numba.njit(**JIT)
@@ -1004,7 +1111,8 @@ def _triangle_boxes(x0, x1, rows, cols, si, sj, shift, out):
 
 @numba.njit(**JIT)
 def _detect(x0, x1, rows, cols, thickness, substeps, dirty, fresh, fresh_blocks, pairs,
-            sides, edge_pairs, edge_sides, boxes, ends, cones, subs, ready):
+            sides, edge_pairs, edge_sides, boxes, ends, cones, subs, ready, crease,
+            crease_ready, crease_cosine):
     """
     Collect (point, triangle) pairs and their sides over the step.
 
@@ -1022,9 +1130,12 @@ def _detect(x0, x1, rows, cols, thickness, substeps, dirty, fresh, fresh_blocks,
     moved. In the pairs of patches along the grid's border, the free edges are tested
     against the other patch's edges (``edge_pairs``, ``edge_sides``:
     :func:`_edge_side`): a free edge can pass through another layer where no point
-    passes through a triangle (a layer's corner hooked round another's edge). Returns
-    how many point-triangle and edge pairs were found (those beyond the arrays' capacity
-    are not kept).
+    passes through a triangle (a layer's corner hooked round another's edge); so can a
+    sharp crease away from the border: each patch's creases (``crease``,
+    :func:`_patch_creases` at ``crease_cosine``, computed when the patch first meets
+    another and marked in ``crease_ready``) are tested against the other patch's edges. It
+    returns how many point-triangle and edge pairs were found (those beyond the arrays'
+    capacity are not kept).
     """
     pr, pc = boxes.shape[0], boxes.shape[1]
     box_a, box_b, shift = np.empty(6), np.empty(6), np.empty(3)
@@ -1035,6 +1146,7 @@ def _detect(x0, x1, rows, cols, thickness, substeps, dirty, fresh, fresh_blocks,
     counts = np.empty(per * per, dtype=np.int64)
     tri_boxes = np.empty((per * per, 2 * SUB * SUB, 6))
     tri_ready = np.empty(per * per, dtype=np.bool_)
+    normals = np.empty((PATCH + 1, PATCH + 1, 2, 4))     # see _patch_creases
     # sweep and prune along x over the patches' boxes
     lows = np.empty(pr * pc)
     for a in range(pr * pc):
@@ -1065,6 +1177,12 @@ def _detect(x0, x1, rows, cols, thickness, substeps, dirty, fresh, fresh_blocks,
                 if not ready[patch_i, patch_j]:
                     _sub_boxes(x0, x1, rows, cols, patch_i, patch_j, subs)
                     ready[patch_i, patch_j] = True
+                # the creases at the start (kept for the step's calls), then at the end
+                for time, x in enumerate((x0, x1)):
+                    if not crease_ready[patch_i, patch_j, time]:
+                        _patch_creases(x, rows, cols, patch_i, patch_j, crease_cosine,
+                                       time + 1, crease, normals)
+                        crease_ready[patch_i, patch_j, time] = True
             count = _points_against(x0, x1, rows, cols, thickness, substeps, subs, shift,
                                     ai, aj, bi, bj, fresh, fresh_blocks, pairs, sides,
                                     count, b_boxes, near, counts, tri_boxes, tri_ready)
@@ -1078,7 +1196,11 @@ def _detect(x0, x1, rows, cols, thickness, substeps, dirty, fresh, fresh_blocks,
                     edge_count = _free_edges_against(
                         x0, x1, rows, cols, thickness, substeps, subs, shift, patch_i,
                         patch_j, other_i, other_j, fresh, fresh_blocks, dirty, edge_pairs,
-                        edge_sides, edge_count)
+                        edge_sides, edge_count, crease)
+                edge_count = _crease_edges_against(
+                    x0, x1, rows, cols, thickness, substeps, subs, shift, patch_i, patch_j,
+                    other_i, other_j, fresh, fresh_blocks, dirty, edge_pairs, edge_sides,
+                    edge_count, crease)
                 if a == b:
                     break
     return count, edge_count
@@ -1433,8 +1555,11 @@ def self_contact(
         # points of (:func:`patch_cache`); whether they hold this step's boxes as of the
         # last call, but at the patches of those points and of the points marked moved
         # (False: every patch is computed); the blocks' boxes of those patches and whether
-        # each patch has them; the longest edge at the start positions
-        boxes, ends, cones, touched, subs, subs_ready, start_edge, reuse):
+        # each patch has them; the longest edge at the start positions; the creases' flags
+        # (bit 1: at the start positions, bit 2: at the end) and whether each patch has
+        # them at the start and at the end
+        boxes, ends, cones, touched, subs, subs_ready, start_edge, crease, crease_ready,
+        reuse):
     """
     Keep a level's points ``thickness`` away from its triangles (see the module docstring).
 
@@ -1458,6 +1583,7 @@ def self_contact(
     shift = _mean_move(x0, x1)
     if not reuse:       # the start positions are the same for a step's calls
         start_edge[0] = _longest_edge(x0, rows, cols)
+        crease_ready[:, :, 0] = False
     longest = _longest_move(x0, x1, 0.0, 1.0, shift)
     # (the mean of the end positions' moves is finite only if all of them are)
     if not (math.isfinite(longest) and math.isfinite(shift[0] + shift[1] + shift[2])):
@@ -1477,9 +1603,19 @@ def self_contact(
     substeps = min(MAX_SUBSTEPS, max(MIN_SUBSTEPS, int(math.ceil(longest / (0.5 * edge)))))
     pairs = np.empty((PAIRS_PER_POINT * n, 2), dtype=np.int64)
     sides = np.empty(PAIRS_PER_POINT * n)
-    free_edges = 2 * (rows + cols)
-    edge_pairs = np.empty((EDGE_PAIRS_PER_EDGE * free_edges, 2), dtype=np.int64)
-    edge_sides = np.empty(EDGE_PAIRS_PER_EDGE * free_edges)
+    # free edges' pairs, and one a point for the creases'
+    edge_capacity = EDGE_PAIRS_PER_EDGE * 2 * (rows + cols) + n
+    edge_pairs = np.empty((edge_capacity, 2), dtype=np.int64)
+    edge_sides = np.empty(edge_capacity)
+    # creases: edges bent enough for an edge as long as the longest at the start to pass
+    # under them with both its ends a thickness clear of their two triangles. Each of
+    # those triangles must drop by a thickness within half that edge of the crease's
+    # line: slope by asin(2 thickness / edge) or more from the edge passing under it, so
+    # their normals part by twice that at least (the edge across the crease's line: the
+    # least bend; a bend spread over two edges a spacing apart needs more than the
+    # thickness allows)
+    crease_sine = min(1.0, 2.0 * thickness / start_edge[0]) if start_edge[0] > 0.0 else 1.0
+    crease_cosine = math.cos(2.0 * math.asin(crease_sine))
     first, dropped = -1, 0
     # the first detection tests only round the points marked moved (the caller's: those
     # that moved since its last call's first detection)
@@ -1495,7 +1631,7 @@ def self_contact(
     # of a position the point has left again, even for its start)
     stale = dirty | touched if reuse else np.ones_like(dirty)
     touched[:, :] = False
-    if subs.shape[:2] != fresh_blocks.shape:
+    if subs.shape[:2] != fresh_blocks.shape or crease.shape[0] != 3 * n:
         raise ValueError('self_contact: the block cache does not fit the level')
     # pairs are pushed a little further than detection looks: one pushed to exactly the
     # thickness would be found again by rounding, and every round would run
@@ -1504,9 +1640,11 @@ def self_contact(
         # pushing a pair apart can bring a point near another triangle: detect again
         _patch_boxes(x0, x1, rows, cols, PATCH, thickness, boxes, ends, cones, stale)
         subs_ready &= ~stale
+        crease_ready[:, :, 1] &= ~stale
         found, edges_found = _detect(x0, x1, rows, cols, thickness, substeps, dirty, fresh,
                                      fresh_blocks, pairs, sides, edge_pairs, edge_sides,
-                                     boxes, ends, cones, subs, subs_ready)
+                                     boxes, ends, cones, subs, subs_ready, crease,
+                                     crease_ready, crease_cosine)
         kept = min(found, pairs.shape[0])
         edges_kept = min(edges_found, edge_pairs.shape[0])
         first = found + edges_found if first < 0 else first
@@ -1575,13 +1713,15 @@ def patch_cache(rows, cols):
     Return what :func:`self_contact` keeps between a step's calls.
 
     The patch boxes, ends, cones and moved patches, the blocks' boxes and which patches
-    have theirs, and the longest edge at the start positions.
+    have theirs, the longest edge at the start positions, the creases' flags and which
+    patches have theirs at the start and at the end positions.
     """
     pr, pc = (rows - 2) // PATCH + 1, (cols - 2) // PATCH + 1
     blocks = ((rows - 2) // SUB + 1, (cols - 2) // SUB + 1)
     return (np.empty((pr, pc, 6)), np.empty((pr, pc, 15)), np.empty((pr, pc, 4)),
             np.zeros((pr, pc), dtype=np.bool_), np.empty(blocks + (15,)),
-            np.zeros((pr, pc), dtype=np.bool_), np.zeros(1))
+            np.zeros((pr, pc), dtype=np.bool_), np.zeros(1),
+            np.zeros(3 * rows * cols, dtype=np.uint8), np.zeros((pr, pc, 2), dtype=np.bool_))
 
 
 @numba.njit(**JIT)
