@@ -39,9 +39,10 @@ two layers can pass through each other in the same way only where both are creas
 edge's ends stay a thickness clear of a layer it passes under only if that layer drops
 by a thickness within half an edge of its crease. So the creases (edges between two
 triangles whose normals part by more than ``2 asin(2 thickness / longest edge)``) are
-tested against the other patch's edges in every pair of patches, as the free edges are
-(a cloth folded twice, its second fold across the first, tangled at their crossing
-without it).
+tested against the other patch's edges in every pair of patches for crossings, as the
+free edges are, but not kept a thickness away from them (a cloth folded twice, its second
+fold across the first, tangled at their crossing without it; the turns of a rolled-up
+border, kept apart, stretched its springs).
 
 Response (at the end positions; rounds of detection, each followed by ``RESOLVE_PASSES``
 Gauss-Seidel passes over its pairs, until a detection finds none, the last round moving
