@@ -84,6 +84,7 @@ from hcloth_ros.tick_stats import TickStats
 import numba
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.clock import Clock, ClockType
+from rclpy.duration import Duration
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, qos_profile_sensor_data, QoSProfile, ReliabilityPolicy
@@ -107,6 +108,9 @@ CATCH_UP = 6        # most ticks one timer call runs to make up for late calls
 # rclpy's own conversion, and with 6 the node lost 2-20 % of an 8 s phase's ticks here
 LAG = 30
 FIRST_START = 'about 30-40 s on 2 cores'
+# s the shutdown waits for each marker topic's subscribers to have the deletes (a stuck
+# one must not hold the exit past the stress test's 2 s)
+DELETE_ACK_WAIT = 0.5
 
 
 class ClothSimNode(Node):
@@ -768,6 +772,10 @@ class ClothSimNode(Node):
         delete_all = Marker(action=Marker.DELETEALL)
         delete_all.header.frame_id = self.frame_id
         self._scene_publisher.publish(MarkerArray(markers=[delete_all]))
+        # the process exits next: wait (briefly) until the subscribers have them, or a
+        # loaded machine's DDS drops them with the process (a CI run lost the DELETE)
+        for publisher in (self.publisher.marker_publisher, self._scene_publisher):
+            publisher.wait_for_all_acked(Duration(seconds=DELETE_ACK_WAIT))
 
     def destroy_node(self):
         # also called by the context's shutdown on a node whose __init__ was interrupted
