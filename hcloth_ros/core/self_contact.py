@@ -27,7 +27,7 @@ def thickness_warning(model, thickness):
     at 0.31-0.90 (README, tangles).
     """
     lv = model.level(model.level_count - 1)
-    spacing = min(model.width / (lv.cols - 1), model.height / (lv.rows - 1))
+    spacing = min(lv.rest[0], lv.rest[2])       # along a row, down a column
     if thickness is None or thickness < spacing:
         return None
     return (f'self_contact.thickness {thickness:g} m is not below the finest grid spacing '

@@ -840,9 +840,11 @@ def _edges_meet(a, b, c, d, thickness):
 
 
 @numba.njit(**JIT)
-def _edge_side(x0, x1, a, b, c, d, thickness, substeps, shift):
+def _edge_side(x0, x1, a, b, c, d, thickness, substeps, shift, near=True):
     """
     Whether edges a-b and c-d make a pair: a-b's side if it crossed c-d (+-2) or ends near (+-1).
+
+    ``near`` False: crossings only (0 for a pair that ends near).
 
     Crossing: the four points become coplanar (the side cubic of :func:`_side_cubic`
     changes sign in a sub-interval) while the two segments pass within ``thickness`` of
@@ -871,6 +873,8 @@ def _edge_side(x0, x1, a, b, c, d, thickness, substeps, shift):
             if _edges_meet(_at(x0, x1, a, tc, shift), _at(x0, x1, b, tc, shift),
                            _at(x0, x1, c, tc, shift), _at(x0, x1, d, tc, shift), thickness):
                 return 2.0 if oa > 0.0 else -2.0
+    if not near:
+        return 0.0
     pa, pb, pc, pd = _point(x1, a), _point(x1, b), _point(x1, c), _point(x1, d)
     if not _edges_meet(pa, pb, pc, pd, thickness):
         return 0.0
@@ -944,13 +948,12 @@ def _edge_against(x0, x1, rows, cols, thickness, substeps, subs, shift, e, bi, b
                         _segment_box(x0, x1, c, dd, shift, 0.0, other)
                         if not _overlap(box, other):
                             continue
-                        side = _edge_side(x0, x1, a, b, c, dd, thickness, substeps, shift)
-                        if not free and abs(side) < 1.5:
-                            # a crease is kept from crossing, not a thickness away: the
-                            # turns of a rolled border, creased past the bound, pushed
-                            # apart, stretched a double fold's springs to 4.5 at 129 x 129
-                            # where crossings alone leave 0.77 (1.13 without creases)
-                            side = 0.0
+                        # a crease is kept from crossing, not a thickness away: the turns
+                        # of a rolled border, creased past the bound, pushed apart,
+                        # stretched a double fold's springs to 4.5 at 129 x 129 where
+                        # crossings alone leave 0.77 (1.13 without creases)
+                        side = _edge_side(x0, x1, a, b, c, dd, thickness, substeps, shift,
+                                          free)
                         if side != 0.0:
                             if count < pairs.shape[0]:
                                 pairs[count, 0], pairs[count, 1] = e, f
