@@ -13,9 +13,10 @@ moving linearly): the triangles are grouped in patches of ``PATCH`` x ``PATCH`` 
 cells, each with the box its vertices sweep (grown by the thickness) and the cone of its
 normals. Patches whose boxes overlap are found by sweep and prune along x; a patch and
 its neighbours are skipped when their normals stay within a cone of about 80 degrees (a
-surface that cannot fold onto itself), so on a sheet with nothing near it nothing else
-runs. In the pairs of patches left, a point tests the blocks of ``SUB`` x ``SUB`` cells
-whose swept boxes its path comes near, then their triangles:
+surface that cannot fold onto itself; neighbours corner to corner only with one of the
+two patches between them inside the same cone), so on a sheet with nothing near it
+nothing else runs. In the pairs of patches left, a point tests the blocks of ``SUB`` x
+``SUB`` cells whose swept boxes its path comes near, then their triangles:
 
 * crossing: its distance to the triangle's plane changes sign in one of ``S``
   sub-intervals (``S`` such that no point moves more than half the longest edge relative
@@ -445,16 +446,15 @@ def _overlap(a, b):
 
 
 @numba.njit(**JIT)
-def _pair_needed(boxes, cones, spreads, ai, aj, bi, bj):
+def _pair_needed(boxes, cones, angles, ai, aj, bi, bj):
     """
     Return whether patches A and B may touch.
 
-    Their boxes overlap and, if they are the same patch or next to each other, their
-    normals spread over more than ``FLAT_COSINE``
-    allows (a surface whose normals all lie within a cone narrower than a hemisphere
-    around one axis cannot fold onto itself; the rest of that criterion, a contour that
-    crosses itself, needs shears a cloth does not take). ``spreads``: each patch's cone's
-    half-angle (see :func:`_cone_spreads`).
+    Their boxes overlap and, if they are the same patch or neighbours, their normals
+    spread over more than ``FLAT_COSINE`` allows (a surface whose normals all lie within a
+    cone narrower than a hemisphere around one axis cannot fold onto itself; the rest of
+    that criterion, a contour that crosses itself, needs shears a cloth does not take).
+    ``angles``: see :func:`_cone_angles`.
     """
     for d in range(3):
         if boxes[ai, aj, d] > boxes[bi, bj, 3 + d] or boxes[bi, bj, d] > boxes[ai, aj, 3 + d]:
@@ -463,20 +463,50 @@ def _pair_needed(boxes, cones, spreads, ai, aj, bi, bj):
         return True
     if ai == bi and aj == bj:
         return cones[ai, aj, 3] < FLAT_COSINE
-    # both cones within FLAT_COSINE of the mean axis: the angles add up
-    between = cones[ai, aj, 0] * cones[bi, bj, 0] + cones[ai, aj, 1] * cones[bi, bj, 1] \
-        + cones[ai, aj, 2] * cones[bi, bj, 2]
-    spread = math.acos(min(1.0, max(-1.0, between))) + spreads[ai, aj] + spreads[bi, bj]
-    return spread > 2.0 * math.acos(FLAT_COSINE)
+    widest = 2.0 * math.acos(FLAT_COSINE)
+    if ai == bi or aj == bj:
+        # both cones within FLAT_COSINE of the mean axis: the angles add up
+        return _between(angles, ai, aj, bi, bj) + angles[ai, aj, 0] + angles[bi, bj, 0] > widest
+    # corner to corner: one can lie over the other, both flat, through pleats in the two
+    # patches between them (a cloth folded twice, its layers crushed, had a point 1 mm
+    # from a triangle of a patch culled so). Culled if the three patches, with one of
+    # those between them, fit in one cone: C's merged with A's (their angles add up),
+    # then B's with that (the merged axis lies between A's and C's, so its angle to B's
+    # is at most C's to B's plus the merged cone's half-angle beyond C's)
+    for ci, cj in ((ai, bj), (bi, aj)):
+        ac = _between(angles, ai, aj, ci, cj) + angles[ai, aj, 0]
+        cb = _between(angles, ci, cj, bi, bj) + angles[bi, bj, 0]
+        if ac + cb <= widest and min(ac, cb) + angles[ci, cj, 0] <= widest:
+            return False
+    return True
 
 
 @numba.njit(**JIT)
-def _cone_spreads(cones):
-    """Return the half-angle of each patch's normal cone, ``acos`` of its smallest cosine."""
-    out = np.empty(cones.shape[:2])
-    for a in range(cones.shape[0]):
-        for b in range(cones.shape[1]):
-            out[a, b] = math.acos(cones[a, b, 3])
+def _between(angles, ai, aj, bi, bj):
+    """Return the angle between the cone axes of patches A and B, next to each other."""
+    if ai == bi:
+        return angles[ai, min(aj, bj), 1]
+    return angles[min(ai, bi), aj, 2]
+
+
+@numba.njit(**JIT)
+def _cone_angles(cones):
+    """
+    Return each patch's cone's half-angle and its axis' angles to its neighbours'.
+
+    ``out[I, J] = (acos of the smallest cosine, angle to patch (I, J + 1)'s axis, angle
+    to patch (I + 1, J)'s axis)`` (0 past the grid's last patch).
+    """
+    pr, pc = cones.shape[0], cones.shape[1]
+    out = np.zeros((pr, pc, 3))
+    for a in range(pr):
+        for b in range(pc):
+            out[a, b, 0] = math.acos(cones[a, b, 3])
+            for m, (a2, b2) in enumerate(((a, b + 1), (a + 1, b))):
+                if a2 < pr and b2 < pc:
+                    between = cones[a, b, 0] * cones[a2, b2, 0] \
+                        + cones[a, b, 1] * cones[a2, b2, 1] + cones[a, b, 2] * cones[a2, b2, 2]
+                    out[a, b, 1 + m] = math.acos(min(1.0, max(-1.0, between)))
     return out
 
 
@@ -1162,7 +1192,7 @@ def _detect(x0, x1, rows, cols, thickness, substeps, dirty, fresh, fresh_blocks,
     for a in range(pr * pc):
         lows[a] = boxes[a // pc, a % pc, 0]
     order = np.argsort(lows)
-    spreads = _cone_spreads(cones)
+    angles = _cone_angles(cones)
     count = edge_count = 0
     for m in range(pr * pc):
         a = order[m]
@@ -1174,7 +1204,7 @@ def _detect(x0, x1, rows, cols, thickness, substeps, dirty, fresh, fresh_blocks,
                 break
             if not (dirty[ai, aj] or dirty[bi, bj]):
                 continue
-            if not _pair_needed(boxes, cones, spreads, ai, aj, bi, bj):
+            if not _pair_needed(boxes, cones, angles, ai, aj, bi, bj):
                 continue
             # again in the frame of the two patches' mean motion
             for d in range(3):
