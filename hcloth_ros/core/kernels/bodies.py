@@ -23,6 +23,7 @@ from hcloth_ros.core.kernels.contact import _movable
 from hcloth_ros.core.kernels.jit import JIT
 
 import numba
+import numpy as np
 
 BOX, SPHERE, CAPSULE = 0, 1, 2
 # packed row: kind, friction, size (box: half extents; sphere: radius; capsule: radius and
@@ -340,6 +341,27 @@ def _inside(b, margin, lx, ly, lz):
 
 
 @numba.njit(**JIT)
+def _beyond_box(b, margin, lx, ly, lz, sx, sy, sz):
+    """
+    Whether the path from s to l (body frame) stays out of the grown body's local box.
+
+    The box of the body grown by ``margin`` along its axes holds the grown body (a round
+    one grows along its normal, no further); a path whose ends lie beyond one of its faces
+    never enters it. The reach sphere of a long thin body (the finger: 40 cm by 2 cm) left
+    18 % of a cloth's points to :func:`_first_inside`.
+    """
+    kind = int(b[KIND])
+    if kind == BOX:
+        hx, hy, hz = b[SIZE], b[SIZE + 1], b[SIZE + 2]
+    else:
+        hx = hy = b[SIZE]
+        hz = b[SIZE] + (b[SIZE + 1] if kind == CAPSULE else 0.0)
+    return (min(lx, sx) > hx + margin or max(lx, sx) < -hx - margin
+            or min(ly, sy) > hy + margin or max(ly, sy) < -hy - margin
+            or min(lz, sz) > hz + margin or max(lz, sz) < -hz - margin)
+
+
+@numba.njit(**JIT)
 def _first_inside(b, margin, sx, sy, sz, lx, ly, lz):
     """
     Fraction of the path from s to l (body frame) where it is first inside b, or -1.
@@ -375,6 +397,46 @@ def _far(lx, ly, lz, sx, sy, sz, reach):
 
 
 @numba.njit(**JIT)
+def _origin_path(b, box):
+    """
+    Write the box of the body's origin over the step into ``box``; return how far it turns.
+
+    ``box = (min xyz, max xyz)`` of its start and end translations; the turn is the
+    Frobenius norm of ``R_end - R_start`` (0 for a body that only translates), at least
+    the largest length change ``(R_end^T - R_start^T) d`` makes of a vector d.
+    """
+    turn = 0.0
+    for m in range(9):
+        turn += (b[R_END + m] - b[R_START + m]) ** 2
+    for d in range(3):
+        box[d] = min(b[T_START + d], b[T_END + d])
+        box[3 + d] = max(b[T_START + d], b[T_END + d])
+    return math.sqrt(turn)
+
+
+@numba.njit(**JIT)
+def _clear(q, q_prev, r, c, b, box, reach, turn):
+    """
+    Whether point (r, c) stays beyond ``reach`` of the body's origin, tested in the world.
+
+    A few comparisons instead of two transforms a point (:func:`_far` then decides): the
+    relative path ``(1 - f) R0^T (p0 - t0) + f R1^T (p1 - t1)`` is at least
+    ``|p(f) - t(f)| - turn |p1 - t1|`` long, and ``p(f) - t(f)`` keeps beyond ``reach +
+    turn |p1 - t1|`` if the boxes of the point's path and of the origin's, that far apart
+    along one axis, do not overlap (``|p1 - t1|`` taken as its 1-norm, not smaller).
+    The contact bench's finger on 257 x 257 leaves 18 % of the points to the transforms.
+    """
+    grow = reach * (1.0 + 1e-9) + turn * (abs(q[0, r, c] - b[T_END])
+                                          + abs(q[1, r, c] - b[T_END + 1])
+                                          + abs(q[2, r, c] - b[T_END + 2]))
+    for d in range(3):
+        a, e = q[d, r, c], q_prev[d, r, c]
+        if min(a, e) > box[3 + d] + grow or max(a, e) < box[d] - grow:
+            return True
+    return False
+
+
+@numba.njit(**JIT)
 def body_contact(
         # inputs / outputs: the level after the step and its velocity change, corrected
         q, qd, dv,
@@ -398,17 +460,22 @@ def body_contact(
     """
     rows, cols = hold_kind.shape
     pushes = 0
+    box = np.empty(6)
     for i in range(bodies.shape[0]):
         b = bodies[i]
         reach = _grown_reach(b, margin)
+        turn = _origin_path(b, box)
         for r in range(rows):
             for c in range(cols):
                 if not _movable(hold_kind, inherited_fixed, r, c):
                     continue
+                if _clear(q, q_prev, r, c, b, box, reach, turn):
+                    continue
                 lx, ly, lz = _to_local(b, R_END, T_END, q[0, r, c], q[1, r, c], q[2, r, c])
                 sx, sy, sz = _to_local(b, R_START, T_START, q_prev[0, r, c],
                                        q_prev[1, r, c], q_prev[2, r, c])
-                if _far(lx, ly, lz, sx, sy, sz, reach):
+                if _far(lx, ly, lz, sx, sy, sz, reach) or \
+                        _beyond_box(b, margin, lx, ly, lz, sx, sy, sz):
                     continue
                 if not _inside(b, margin, lx, ly, lz):
                     f = _first_inside(b, margin, sx, sy, sz, lx, ly, lz)
