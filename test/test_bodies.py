@@ -328,41 +328,67 @@ def test_a_body_moves_from_its_last_committed_pose():
     assert control.bodies.packed()[0][26] == 2.0                           # committed
 
 
+def _body_row(kind, size, r0, t0, r1, t1):
+    """Return a body as the kernel reads it: kind, size, end pose, start pose."""
+    from hcloth_ros.core.kernels.bodies import R_END, R_START, ROW, SIZE, T_END, T_START
+    b = np.zeros(ROW)
+    b[0] = kind
+    b[SIZE:SIZE + len(size)] = size
+    b[R_START:R_START + 9], b[T_START:T_START + 3] = np.ravel(r0), t0
+    b[R_END:R_END + 9], b[T_END:T_END + 3] = np.ravel(r1), t1
+    return b
+
+
 def test_the_world_box_prefilter_skips_only_points_the_exact_test_skips():
     """
     ``_clear`` (world boxes, no transforms) is a shortcut for ``_far`` (the relative path).
 
-    Random bodies turning up to 1 rad and moving up to 0.3 m in a step, points moving up
-    to 0.2 m: every point it skips is beyond the body's reach by the exact test, and on the
-    finger scene's 257 x 257 cloth it skips all but the points round the finger.
+    Random capsules turning up to 1 rad and moving up to 0.3 m in a step, points moving up
+    to 0.2 m; then still points 1-3 reaches from a turning body's still origin, where the
+    turn's term decides: every point it skips is beyond the body's reach by the exact
+    test, and with a fifth of that term some are not (the samples reach the bound). On
+    the finger scene's 257 x 257 cloth it leaves the points round the finger.
     """
     from hcloth_ros.core.kernels.bodies import (_clear, _far, _grown_reach, _origin_path,
-                                                _to_local, R_END, R_START, ROW, T_END,
-                                                T_START, CAPSULE)
+                                                _to_local, R_END, R_START, T_END, T_START,
+                                                CAPSULE)
     rng = np.random.default_rng(7)
-    n = 4000
-    skipped = far_anyway = 0
-    for trial in range(40):
-        b = np.zeros(ROW)
-        b[0], b[2], b[3] = CAPSULE, 0.05, 0.1
-        r0 = _rotation(rng.normal(size=3), rng.uniform(0, np.pi))
-        r1 = r0 @ _rotation(rng.normal(size=3), rng.uniform(0, 1.0 if trial % 2 else 0.0))
-        t0 = rng.uniform(-0.2, 0.2, 3)
-        b[R_START:R_START + 9], b[T_START:T_START + 3] = r0.ravel(), t0
-        b[R_END:R_END + 9], b[T_END:T_END + 3] = r1.ravel(), t0 + rng.uniform(-0.3, 0.3, 3)
-        p0 = rng.uniform(-0.6, 0.6, (3, 1, n))
-        p1 = p0 + rng.uniform(-0.2, 0.2, (3, 1, n))
+
+    def check(b, p0, p1, scale=1.0):
         reach = _grown_reach(b, MARGIN)
         box = np.empty(6)
-        turn = _origin_path(b, box)
-        for c in range(n):
+        turn = _origin_path(b, box) * scale
+        skipped = wrong = 0
+        for c in range(p0.shape[2]):
             if _clear(p1, p0, 0, c, b, box, reach, turn):
                 skipped += 1
                 lx, ly, lz = _to_local(b, R_END, T_END, *p1[:, 0, c])
                 sx, sy, sz = _to_local(b, R_START, T_START, *p0[:, 0, c])
-                far_anyway += _far(lx, ly, lz, sx, sy, sz, reach)
+                wrong += not _far(lx, ly, lz, sx, sy, sz, reach)
+        return skipped, wrong
+
+    n, skipped = 4000, 0
+    for trial in range(40):
+        r0 = _rotation(rng.normal(size=3), rng.uniform(0, np.pi))
+        r1 = r0 @ _rotation(rng.normal(size=3), rng.uniform(0, 1.0 if trial % 2 else 0.0))
+        t0 = rng.uniform(-0.2, 0.2, 3)
+        b = _body_row(CAPSULE, [0.05, 0.1], r0, t0, r1, t0 + rng.uniform(-0.3, 0.3, 3))
+        p0 = rng.uniform(-0.6, 0.6, (3, 1, n))
+        count, wrong = check(b, p0, p0 + rng.uniform(-0.2, 0.2, (3, 1, n)))
+        assert wrong == 0, trial
+        skipped += count
     assert skipped > n * 40 // 4          # it does skip
-    assert far_anyway == skipped          # and only what the exact test skips
+    wrong_with_less = 0
+    for trial in range(40):
+        r0 = _rotation(rng.normal(size=3), rng.uniform(0, np.pi))
+        r1 = r0 @ _rotation(rng.normal(size=3), rng.uniform(2.0, np.pi))
+        b = _body_row(CAPSULE, [0.05, 0.1], r0, np.zeros(3), r1, np.zeros(3))
+        reach = _grown_reach(b, MARGIN)
+        direction = rng.normal(size=(3, 1, n))
+        p = direction / np.linalg.norm(direction, axis=0) * rng.uniform(1, 3, n) * reach
+        assert check(b, p, p)[1] == 0, trial
+        wrong_with_less += check(b, p, p, 0.2)[1]
+    assert wrong_with_less > 0
     # the finger under the middle of a 257 x 257 cloth: the strip round it is left
     from hcloth_ros.bench.self_contact import _move_finger, scene_setup
     model, state, control = scene_setup(257, 'finger')
@@ -374,4 +400,28 @@ def test_the_world_box_prefilter_skips_only_points_the_exact_test_skips():
     q = state.q[-1]
     left = sum(not _clear(q, q, r, c, b, box, reach, turn)
                for r in range(0, 257, 4) for c in range(0, 257, 4))
-    assert left <= 0.2 * 65 * 65, left      # the reach sphere's square: 0.18 of the cloth
+    assert left <= 0.2 * 65 * 65, left      # the reach's square round the finger: 0.18
+
+
+@pytest.mark.parametrize('kind,size', [(0, [0.1, 0.06, 0.08]), (1, [0.1]), (2, [0.05, 0.1])])
+def test_a_path_beyond_a_face_of_the_grown_body_s_box_never_enters_it(kind, size):
+    """
+    ``_beyond_box``: every path it skips stays out of the grown body at 200 points along it.
+
+    Box, sphere and capsule (its axis along the body's z), paths from points within 1.5
+    times the grown body's local box, moving up to its half size along each axis: some
+    are skipped, some not.
+    """
+    from hcloth_ros.core.kernels.bodies import _beyond_box, _inside
+    rng = np.random.default_rng(11)
+    b = _body_row(kind, size, np.eye(3), np.zeros(3), np.eye(3), np.zeros(3))
+    half = np.array(size if kind == 0 else [size[0], size[0], sum(size)]) + MARGIN
+    samples = np.linspace(0.0, 1.0, 200)
+    skipped = 0
+    for _ in range(3000):
+        s = rng.uniform(-1.5 * half, 1.5 * half)
+        lo = s + rng.uniform(-half, half)
+        if _beyond_box(b, MARGIN, *lo, *s):
+            skipped += 1
+            assert not any(_inside(b, MARGIN, *(s + f * (lo - s))) for f in samples)
+    assert 300 < skipped < 2700, skipped

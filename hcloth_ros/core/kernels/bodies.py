@@ -402,8 +402,8 @@ def _origin_path(b, box):
     Write the box of the body's origin over the step into ``box``; return how far it turns.
 
     ``box = (min xyz, max xyz)`` of its start and end translations; the turn is the
-    Frobenius norm of ``R_end - R_start`` (0 for a body that only translates), at least
-    the largest length change ``(R_end^T - R_start^T) d`` makes of a vector d.
+    Frobenius norm of ``R_end - R_start`` (0 for a body that only translates), so that
+    ``|(R_end - R_start)^T d| <= turn |d|`` for every vector d.
     """
     turn = 0.0
     for m in range(9):

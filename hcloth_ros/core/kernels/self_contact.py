@@ -13,9 +13,9 @@ moving linearly): the triangles are grouped in patches of ``PATCH`` x ``PATCH`` 
 cells, each with the box its vertices sweep (grown by the thickness) and the cone of its
 normals. Patches whose boxes overlap are found by sweep and prune along x; a patch and
 its neighbours are skipped when their normals stay within a cone of about 80 degrees (a
-surface that cannot fold onto itself; neighbours corner to corner only with one of the
-two patches between them inside the same cone), so on a sheet with nothing near it
-nothing else runs. In the pairs of patches left, a point tests the blocks of ``SUB`` x
+surface that cannot fold onto itself; neighbours corner to corner only with the two
+patches between them inside the same cone), so on a sheet with nothing near it nothing
+else runs. In the pairs of patches left, a point tests the blocks of ``SUB`` x
 ``SUB`` cells whose swept boxes its path comes near, then their triangles:
 
 * crossing: its distance to the triangle's plane changes sign in one of ``S``
@@ -454,6 +454,8 @@ def _pair_needed(boxes, cones, angles, ai, aj, bi, bj):
     spread over more than ``FLAT_COSINE`` allows (a surface whose normals all lie within a
     cone narrower than a hemisphere around one axis cannot fold onto itself; the rest of
     that criterion, a contour that crosses itself, needs shears a cloth does not take).
+    Neighbours side by side: the narrowest cone holding both patches' cones. Corner to
+    corner: the four patches round their common corner in one cone (:func:`_block_flat`).
     ``angles``: see :func:`_cone_angles`.
     """
     for d in range(3):
@@ -463,22 +465,58 @@ def _pair_needed(boxes, cones, angles, ai, aj, bi, bj):
         return True
     if ai == bi and aj == bj:
         return cones[ai, aj, 3] < FLAT_COSINE
-    widest = 2.0 * math.acos(FLAT_COSINE)
     if ai == bi or aj == bj:
-        # both cones within FLAT_COSINE of the mean axis: the angles add up
-        return _between(angles, ai, aj, bi, bj) + angles[ai, aj, 0] + angles[bi, bj, 0] > widest
-    # corner to corner: one can lie over the other, both flat, through pleats in the two
-    # patches between them (a cloth folded twice, its layers crushed, had a point 1 mm
-    # from a triangle of a patch culled so). Culled if the three patches, with one of
-    # those between them, fit in one cone: C's merged with A's (their angles add up),
-    # then B's with that (the merged axis lies between A's and C's, so its angle to B's
-    # is at most C's to B's plus the merged cone's half-angle beyond C's)
-    for ci, cj in ((ai, bj), (bi, aj)):
-        ac = _between(angles, ai, aj, ci, cj) + angles[ai, aj, 0]
-        cb = _between(angles, ci, cj, bi, bj) + angles[bi, bj, 0]
-        if ac + cb <= widest and min(ac, cb) + angles[ci, cj, 0] <= widest:
-            return False
-    return True
+        return _merged(_between(angles, ai, aj, bi, bj), angles[ai, aj, 0],
+                       angles[bi, bj, 0])[0] > math.acos(FLAT_COSINE)
+    # corner to corner the two meet at one point, and each can be flat and lie over the
+    # other through pleats in the two patches between them (a cloth folded twice, its
+    # layers crushed, had a point 1 mm from a triangle of a patch culled so); with a
+    # third patch between them in the same cone, a cube's corner (the fourth patch
+    # folded shut, the two's edges along its fold) still is
+    return angles[min(ai, bi), min(aj, bj), 3] == 0.0
+
+
+@numba.njit(**JIT)
+def _merged(t, a, b):
+    """
+    Return the narrowest cone holding two cones, of half-angles a and b, axes t apart.
+
+    As ``(half-angle, its axis' angle from the first's axis)``, the axis on the arc
+    between the two: the wider of the two if it holds the other, else the cone whose
+    edges touch both.
+    """
+    if t + b <= a:
+        return a, 0.0
+    if t + a <= b:
+        return b, t
+    m = 0.5 * (t + a + b)
+    return m, m - a
+
+
+@numba.njit(**JIT)
+def _block_flat(angles, i, j):
+    """
+    Whether patches (i, j), (i, j + 1), (i + 1, j + 1), (i + 1, j) fit in one flat cone.
+
+    A cone of half-angle ``acos(FLAT_COSINE)``: two of them side by side merged (the angle
+    between their axes is known), each of the other two within it by the triangle
+    inequality through its neighbour among those two (the merged axis lies on the arc
+    between theirs). The four ways round are tried.
+    """
+    half = math.acos(FLAT_COSINE)
+    ri = (i, i, i + 1, i + 1)
+    rj = (j, j + 1, j + 1, j)
+    for m in range(4):
+        x, y, u, w = m, (m + 1) % 4, (m + 2) % 4, (m + 3) % 4
+        t = _between(angles, ri[x], rj[x], ri[y], rj[y])
+        cone, off = _merged(t, angles[ri[x], rj[x], 0], angles[ri[y], rj[y], 0])
+        if cone <= half and \
+                _between(angles, ri[y], rj[y], ri[u], rj[u]) + t - off \
+                + angles[ri[u], rj[u], 0] <= half and \
+                _between(angles, ri[x], rj[x], ri[w], rj[w]) + off \
+                + angles[ri[w], rj[w], 0] <= half:
+            return True
+    return False
 
 
 @numba.njit(**JIT)
@@ -495,10 +533,12 @@ def _cone_angles(cones):
     Return each patch's cone's half-angle and its axis' angles to its neighbours'.
 
     ``out[I, J] = (acos of the smallest cosine, angle to patch (I, J + 1)'s axis, angle
-    to patch (I + 1, J)'s axis)`` (0 past the grid's last patch).
+    to patch (I + 1, J)'s axis, 1 if the four patches from (I, J) to (I + 1, J + 1) fit
+    in one flat cone, else 0)`` (0 past the grid's last patch; :func:`_block_flat` once
+    a corner, not once for each of its two pairs of patches corner to corner).
     """
     pr, pc = cones.shape[0], cones.shape[1]
-    out = np.zeros((pr, pc, 3))
+    out = np.zeros((pr, pc, 4))
     for a in range(pr):
         for b in range(pc):
             out[a, b, 0] = math.acos(cones[a, b, 3])
@@ -507,6 +547,9 @@ def _cone_angles(cones):
                     between = cones[a, b, 0] * cones[a2, b2, 0] \
                         + cones[a, b, 1] * cones[a2, b2, 1] + cones[a, b, 2] * cones[a2, b2, 2]
                     out[a, b, 1 + m] = math.acos(min(1.0, max(-1.0, between)))
+    for a in range(pr - 1):
+        for b in range(pc - 1):
+            out[a, b, 3] = 1.0 if _block_flat(out, a, b) else 0.0
     return out
 
 
