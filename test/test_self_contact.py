@@ -963,11 +963,6 @@ def test_a_thickness_not_below_the_finest_spacing_is_named_with_the_spacing():
     assert 'spacing 0.00195 m' in thickness_warning(narrow, 0.004)
 
 
-def _rotation_about_y(angle):
-    c, s = np.cos(angle), np.sin(angle)
-    return np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
-
-
 @pytest.mark.parametrize('name', ['multigrid', 'hierarchical'])
 def test_a_cloth_folded_twice_does_not_tangle_where_its_creases_cross(name):
     """
@@ -986,7 +981,7 @@ def test_a_cloth_folded_twice_does_not_tangle_where_its_creases_cross(name):
     scene, ``tools/double_fold.py``: 0.20 under ``multigrid``, whose landing alone
     reaches 0.2, and 0.147 under ``hierarchical``).
     """
-    from hcloth_ros.bench.self_contact import scene_setup
+    from hcloth_ros.bench.self_contact import scene_setup, second_fold
     model, state, control = scene_setup(65, 'folded')
     solver = make_solver(name, model, thickness=0.004)
     step = 0
@@ -1001,16 +996,9 @@ def test_a_cloth_folded_twice_does_not_tangle_where_its_creases_cross(name):
                 assert intersections(state.q[-1]) == 0, step
 
     advance(45)                             # landed, the first fold lying on the ground
-    finest = model.level_count - 1
-    points = state.points_by_id(model, finest)
-    x = points[:, 0]
-    ids = np.flatnonzero(x > x.max() - 0.06)        # the far strip, both layers
-    held = points[ids].mean(axis=0)
-    axis = np.array([0.5 * (x.min() + x.max()), held[1], points[:, 2].max() + 0.01])
-    control.grasp('g', ids, state, np.eye(3), held)
+    move = second_fold(model, state, control, 72)
     for m in range(1, 73):                  # over the top, about the middle, in 1.2 s
-        turn = _rotation_about_y(-np.pi * m / 72)
-        control.move_grasp('g', turn, axis + turn @ (held - axis))
+        move(m)
         advance(1)
-    control.release('g')
+    control.release('fold')
     advance(12)

@@ -19,13 +19,6 @@ self-contact.
 import argparse
 
 import numba
-import numpy as np
-
-
-def _turn_about_y(angle):
-    """Rotation by ``angle`` about the y axis."""
-    c, s = np.cos(angle), np.sin(angle)
-    return np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
 
 
 def main(argv=None):
@@ -38,7 +31,7 @@ def main(argv=None):
                         help='a solver option (YAML value), repeatable')
     args = parser.parse_args(argv)
     numba.set_num_threads(1)
-    from hcloth_ros.bench.self_contact import scene_setup
+    from hcloth_ros.bench.self_contact import scene_setup, second_fold
     from hcloth_ros.core import make_solver
     from hcloth_ros.core.kernels import stats
     from hcloth_ros.params import assignments
@@ -64,15 +57,9 @@ def main(argv=None):
                 tangled[step] = count_now
 
     advance(45)
-    points = state.points_by_id(model, finest)
-    x = points[:, 0]
-    ids = np.flatnonzero(x > x.max() - 0.06)
-    held = points[ids].mean(axis=0)
-    axis = np.array([0.5 * (x.min() + x.max()), held[1], points[:, 2].max() + 0.01])
-    control.grasp('fold', ids, state, np.eye(3), held)
+    move = second_fold(model, state, control, args.fold_steps)
     for m in range(1, args.fold_steps + 1):
-        turn = _turn_about_y(-np.pi * m / args.fold_steps)
-        control.move_grasp('fold', turn, axis + turn @ (held - axis))
+        move(m)
         advance(1)
         if m % 12 == 0:
             print(f'fold step {m} of {args.fold_steps}: largest strain so far '

@@ -116,6 +116,30 @@ def _move_finger(control, i):
     control.bodies.set_pose('finger', ALONG_Y, (0.2 * i / 60, 0.5, 1.5 + 0.011 - 0.003))
 
 
+def second_fold(model, state, control, steps):
+    """
+    Grasp the folded drop's far 6 cm strip (both layers) for a second fold; return its mover.
+
+    The returned function, called with m = 1 .. ``steps`` before each step, turns the
+    grasp 180 degrees in all about a line along y, 1 cm over the cloth's top at its
+    middle (``tools/double_fold.py``, ``test_self_contact.py``'s double fold). The grasp
+    is named ``'fold'``.
+    """
+    points = state.points_by_id(model, model.level_count - 1)
+    x = points[:, 0]
+    ids = np.flatnonzero(x > x.max() - 0.06)
+    held = points[ids].mean(axis=0)
+    axis = np.array([0.5 * (x.min() + x.max()), held[1], points[:, 2].max() + 0.01])
+    control.grasp('fold', ids, state, np.eye(3), held)
+
+    def move(m):
+        angle = -np.pi * m / steps
+        c, s = np.cos(angle), np.sin(angle)
+        turn = np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])   # about y
+        control.move_grasp('fold', turn, axis + turn @ (held - axis))
+    return move
+
+
 def run(n, scene, steps, thickness, interval, rounds=16, extra=None):
     """
     Time ``steps`` steps of one scene.

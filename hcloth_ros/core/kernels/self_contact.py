@@ -88,6 +88,7 @@ SUB = 2
 # Patches whose triangles' normals all lie within this cosine of their mean normal (about
 # 80 degrees) cannot touch themselves or their neighbour patches (see _pair_needed).
 FLAT_COSINE = 0.17
+FLAT_HALF_ANGLE = math.acos(FLAT_COSINE)
 # Pairs are pushed this fraction beyond the thickness (see self_contact).
 SLACK = 0.05
 # Gauss-Seidel passes over the pairs of one detection.
@@ -467,7 +468,7 @@ def _pair_needed(boxes, cones, angles, ai, aj, bi, bj):
         return cones[ai, aj, 3] < FLAT_COSINE
     if ai == bi or aj == bj:
         return _merged(_between(angles, ai, aj, bi, bj), angles[ai, aj, 0],
-                       angles[bi, bj, 0])[0] > math.acos(FLAT_COSINE)
+                       angles[bi, bj, 0])[0] > FLAT_HALF_ANGLE
     # corner to corner the two meet at one point, and each can be flat and lie over the
     # other through pleats in the two patches between them (a cloth folded twice, its
     # layers crushed, had a point 1 mm from a triangle of a patch culled so); with a
@@ -498,12 +499,12 @@ def _block_flat(angles, i, j):
     """
     Whether patches (i, j), (i, j + 1), (i + 1, j + 1), (i + 1, j) fit in one flat cone.
 
-    A cone of half-angle ``acos(FLAT_COSINE)``: two of them side by side merged (the angle
+    A cone of half-angle ``FLAT_HALF_ANGLE``: two of them side by side merged (the angle
     between their axes is known), each of the other two within it by the triangle
     inequality through its neighbour among those two (the merged axis lies on the arc
     between theirs). The four ways round are tried.
     """
-    half = math.acos(FLAT_COSINE)
+    half = FLAT_HALF_ANGLE
     ri = (i, i, i + 1, i + 1)
     rj = (j, j + 1, j + 1, j)
     for m in range(4):
