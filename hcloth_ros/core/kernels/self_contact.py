@@ -61,10 +61,10 @@ step, and that move divided by ``h`` off their velocities. A point above an obst
 :func:`~hcloth_ros.core.self_contact.supports`) moves towards it by at most that room,
 by a push or by friction; with no room left (``ROOM_TOLERANCE``) its weight is zero for a
 push into it and for the velocity it takes, and the other side of the pair moves alone,
-each of its vertices no further than it needs itself and leaving no faster than the
-resting side moves. A side pushed up off a resting side comes to rest on it (no room
-left for the rest of the call): a stack of layers on the ground is resolved from the
-bottom up, as shock propagation resolves stacks of rigid bodies. An edge pair moves the
+no vertex of it leaving faster than the resting side moves. A side pushed up off a
+resting side comes to rest on it (no room left for the rest of the call): a stack of
+layers on the ground is resolved from the bottom up, as shock propagation resolves stacks
+of rigid bodies. An edge pair moves the
 two edges' closest points apart the same way (weights ``1 - s, s`` and ``1 - t, t``,
 along the edges' common normal to the side they came from, or the line between the
 closest points), without friction.
@@ -1491,8 +1491,9 @@ def _push(x1, qd, dv, inv_mass, support, verts, weights, ahead, nx, ny, nz, gap,
     Velocities lose the sum's approach along n (inelastic: a push turned into velocity,
     push / h, made the layers bounce and stretched the cloth). A vertex resting on an
     obstacle does not move into it (its weight is zero for this push); ``one_side``:
-    only the first side moves (only the second if the first is held). Returns ``(lam,
-    denom, inverse masses used)``; ``denom`` 0: nothing could move.
+    only the first side moves (only the second if the first is held). A side pushed up
+    off one that rests comes to rest (:func:`_come_to_rest`). Returns ``(lam, denom,
+    inverse masses used)``; ``denom`` 0: nothing could move.
     """
     n_ = (nx, ny, nz)
     ims = (_free_mass(inv_mass, support, verts[0], n_, 0 < ahead),
@@ -1516,50 +1517,23 @@ def _push(x1, qd, dv, inv_mass, support, verts, weights, ahead, nx, ny, nz, gap,
     if not denom > 0.0:
         return 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
     lam = -gap / denom
-    # a side that does not move (resting, held, or not moved in the last round): the
-    # other side's vertices go no further than each needs (see _no_further)
+    # a side that does not move (resting, held, or not moved in the last round)
     still = (True, True)
     for m in range(4):
         if ims[m] > 0.0:
             still = (False, still[1]) if m < ahead else (still[0], False)
+    clipped = 0         # bit m: vertex m reached its obstacle
     for m in range(4):
         v = verts[m]
         move = lam * ims[m] * weights[m]
-        if move != 0.0 and still[1 if m < ahead else 0]:
-            move = _no_further(x1, verts, weights, ahead, m, move, nx, ny, nz, gap)
-        _shift(x1, v, _room(support, v, move, nx, ny, nz), nx, ny, nz)
-    _come_to_rest(inv_mass, support, verts, weights, ims, ahead, nx, ny, nz)
-    _inelastic(qd, dv, inv_mass, support, verts, weights, ims, ahead, still, nx, ny, nz)
+        allowed = _room(support, v, move, nx, ny, nz)
+        if allowed != move:
+            clipped |= 1 << m
+        _shift(x1, v, allowed, nx, ny, nz)
+    if not one_side:    # (the last round: nothing detects after it)
+        _come_to_rest(inv_mass, support, verts, weights, ims, ahead, nx, ny, nz)
+    _inelastic(qd, verts, weights, ims, clipped, ahead, still, nx, ny, nz, dv)
     return lam, denom, ims[0], ims[1], ims[2], ims[3]
-
-
-@numba.njit(**JIT)
-def _no_further(x, verts, weights, ahead, m, move, nx, ny, nz, gap):
-    """
-    Clip vertex m's push ``move`` (along n) to what takes it itself to the pair's target.
-
-    The pair's other side stays; its weighted point is where the target separation along
-    n is measured from (the pair's separation less ``gap``). A vertex of a triangle
-    pushed off a point that stays took the triangle's whole push when the point lay near
-    it, then more from the next pair round it: the layers of a stack pushed off the one on
-    the ground ended up to half a thickness higher than the thickness needs. A vertex
-    already that far goes nowhere; the pair's other vertices go on in the next pass.
-    """
-    here = 0.0      # the pair's separation along n, and the vertex's own
-    for e in range(4):
-        here += weights[e] * (x[0, verts[e]] * nx + x[1, verts[e]] * ny
-                              + x[2, verts[e]] * nz)
-    own = weights[m] * (x[0, verts[m]] * nx + x[1, verts[m]] * ny + x[2, verts[m]] * nz)
-    other = 0.0
-    for e in range(4):
-        if (e < ahead) != (m < ahead):
-            other += weights[e] * (x[0, verts[e]] * nx + x[1, verts[e]] * ny
-                                   + x[2, verts[e]] * nz)
-    # own side's weights sum to 1 (a point; an edge's 1 - s, s) or -1 (a triangle's -u,
-    # -v, -w; an edge's t - 1, -t): the vertex's separation as if it were its side
-    sep = own / abs(weights[m]) * (1.0 if m < ahead else -1.0) + other
-    need = max(here - gap - sep, 0.0)
-    return min(move, need) if m < ahead else max(move, -need)
 
 
 @numba.njit(**JIT)
@@ -1567,27 +1541,26 @@ def _come_to_rest(inv_mass, support, verts, weights, ims, ahead, nx, ny, nz):
     """
     After a push: a side pushed up off a side that rests comes to rest on it.
 
-    A side rests when every vertex of it in the pair (non-zero weight) is free but has
-    no room left towards its obstacle (:func:`_blocked`). The other side's vertices that
-    the push moved (``ims`` non-zero) up along their own obstacle's normal (within 45
-    degrees) lose their room: for the rest of the call nothing pushes them down either,
-    and the layer on them moves alone. A stack of layers on the ground is so resolved
-    from the bottom up, one layer a pass at least (the shock propagation of rigid
-    stacks); with the weights shared a layer pushed down by the one above was pushed back
-    up by the one below, and the passes did not converge (the hierarchical double fold's
-    four layers at rest, doc/self_contact_log.md).
+    A side rests when every vertex of it in the pair (non-zero weight) is free but did
+    not move, blocked by its obstacle (:func:`_blocked`; ``ims`` zero, the pushes not
+    one-sided). The other side's vertices that the push moved (``ims`` non-zero) up
+    along their own obstacle's normal (within 45 degrees) lose their room: for the rest
+    of the call nothing pushes them down either, and the layer on them moves alone. A
+    stack of layers on the ground is so resolved from the bottom up, one layer a pass at
+    least (the shock propagation of rigid stacks); with the weights shared a layer pushed
+    down by the one above was pushed back up by the one below, and the passes did not
+    converge (the hierarchical double fold's four layers at rest,
+    doc/self_contact_log.md).
     """
-    n_ = (nx, ny, nz)
     rests = (True, True)        # the first side (the ``ahead`` vertices), the other
     for m in range(4):
-        if weights[m] != 0.0 and not (inv_mass[verts[m]] > 0.0 and _free_mass(
-                inv_mass, support, verts[m], n_, m < ahead) == 0.0):
+        if weights[m] != 0.0 and not (ims[m] == 0.0 and inv_mass[verts[m]] > 0.0):
             rests = (False, rests[1]) if m < ahead else (rests[0], False)
     if not (rests[0] or rests[1]):
         return
     for m in range(4):
         v = verts[m]
-        if weights[m] == 0.0 or ims[m] == 0.0 or rests[0 if m < ahead else 1]:
+        if ims[m] == 0.0 or rests[0 if m < ahead else 1] or support[3, v] <= 0.0:
             continue
         sign = 1.0 if m < ahead else -1.0
         if sign * (support[0, v] * nx + support[1, v] * ny + support[2, v] * nz) > UPWARD:
@@ -1595,16 +1568,15 @@ def _come_to_rest(inv_mass, support, verts, weights, ims, ahead, nx, ny, nz):
 
 
 @numba.njit(**JIT)
-def _inelastic(qd, dv, inv_mass, support, verts, weights, ims, ahead, still, nx, ny, nz):
+def _inelastic(qd, verts, weights, ims, clipped, ahead, still, nx, ny, nz, dv):
     """
     Take a pushed pair's approach along n off its vertices' velocities.
 
-    Shared as the push was (``ims``), but a vertex the push left with no room towards
-    its obstacle takes none of it (it stays at the obstacle): with the push's shares, a
+    Shared as the push was (``ims``), but a vertex the push brought to its obstacle (bit
+    m of ``clipped``) takes none of it (it stays at the obstacle): with the push's shares, a
     layer lying on the ground took its part of the approach of the layer falling onto
     it, every step, and the stack on it never came to rest (4 cm/s downwards at rest).
     """
-    n_ = (nx, ny, nz)
     vn = 0.0
     for d, n_d in ((0, nx), (1, ny), (2, nz)):
         along = 0.0
@@ -1613,10 +1585,8 @@ def _inelastic(qd, dv, inv_mass, support, verts, weights, ims, ahead, still, nx,
         vn += along * n_d
     if not vn < 0.0:
         return
-    shares = (ims[0] if _free_mass(inv_mass, support, verts[0], n_, 0 < ahead) > 0.0 else 0.0,
-              ims[1] if _free_mass(inv_mass, support, verts[1], n_, 1 < ahead) > 0.0 else 0.0,
-              ims[2] if _free_mass(inv_mass, support, verts[2], n_, False) > 0.0 else 0.0,
-              ims[3] if _free_mass(inv_mass, support, verts[3], n_, False) > 0.0 else 0.0)
+    shares = (0.0 if clipped & 1 else ims[0], 0.0 if clipped & 2 else ims[1],
+              0.0 if clipped & 4 else ims[2], 0.0 if clipped & 8 else ims[3])
     total, most = 0.0, 0.0      # as the push's (see _push)
     for m in range(4):
         total += weights[m] * weights[m] * shares[m]
