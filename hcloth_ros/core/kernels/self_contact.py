@@ -64,10 +64,9 @@ push into it and for the velocity it takes, and the other side of the pair moves
 no vertex of it leaving faster than the resting side moves. A side pushed up off a
 resting side comes to rest on it (no room left for the rest of the call): a stack of
 layers on the ground is resolved from the bottom up, as shock propagation resolves stacks
-of rigid bodies. An edge pair moves the
-two edges' closest points apart the same way (weights ``1 - s, s`` and ``1 - t, t``,
-along the edges' common normal to the side they came from, or the line between the
-closest points), without friction.
+of rigid bodies. An edge pair moves the two edges' closest points apart the same way
+(weights ``1 - s, s`` and ``1 - t, t``, along the edges' common normal to the side they
+came from, or the line between the closest points), without friction.
 """
 
 import math
@@ -1573,9 +1572,10 @@ def _inelastic(qd, verts, weights, ims, clipped, ahead, still, nx, ny, nz, dv):
     Take a pushed pair's approach along n off its vertices' velocities.
 
     Shared as the push was (``ims``), but a vertex the push brought to its obstacle (bit
-    m of ``clipped``) takes none of it (it stays at the obstacle): with the push's shares, a
-    layer lying on the ground took its part of the approach of the layer falling onto
-    it, every step, and the stack on it never came to rest (4 cm/s downwards at rest).
+    m of ``clipped``) takes none of it (it stays at the obstacle): with the push's
+    shares, a layer lying on the ground took its part of the approach of the layer
+    falling onto it, every step, and the stack on it never came to rest (4 cm/s
+    downwards at rest).
     """
     vn = 0.0
     for d, n_d in ((0, nx), (1, ny), (2, nz)):
