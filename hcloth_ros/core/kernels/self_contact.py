@@ -1516,11 +1516,6 @@ def _push(x1, qd, dv, inv_mass, support, verts, weights, ahead, nx, ny, nz, gap,
     if not denom > 0.0:
         return 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
     lam = -gap / denom
-    # a side that does not move (resting, held, or not moved in the last round)
-    still = (True, True)
-    for m in range(4):
-        if ims[m] > 0.0:
-            still = (False, still[1]) if m < ahead else (still[0], False)
     clipped = 0         # bit m: vertex m reached its obstacle
     for m in range(4):
         v = verts[m]
@@ -1531,7 +1526,7 @@ def _push(x1, qd, dv, inv_mass, support, verts, weights, ahead, nx, ny, nz, gap,
         _shift(x1, v, allowed, nx, ny, nz)
     if not one_side:    # (the last round: nothing detects after it)
         _come_to_rest(inv_mass, support, verts, weights, ims, ahead, nx, ny, nz)
-    _inelastic(qd, verts, weights, ims, clipped, ahead, still, nx, ny, nz, dv)
+    _inelastic(qd, verts, weights, ims, clipped, ahead, nx, ny, nz, dv)
     return lam, denom, ims[0], ims[1], ims[2], ims[3]
 
 
@@ -1567,7 +1562,7 @@ def _come_to_rest(inv_mass, support, verts, weights, ims, ahead, nx, ny, nz):
 
 
 @numba.njit(**JIT)
-def _inelastic(qd, verts, weights, ims, clipped, ahead, still, nx, ny, nz, dv):
+def _inelastic(qd, verts, weights, ims, clipped, ahead, nx, ny, nz, dv):
     """
     Take a pushed pair's approach along n off its vertices' velocities.
 
@@ -1599,23 +1594,29 @@ def _inelastic(qd, verts, weights, ims, clipped, ahead, still, nx, ny, nz, dv):
         for m in range(4):
             qd[d, verts[m]] += mu * shares[m] * weights[m] * n_d
             dv[d, verts[m]] += mu * shares[m] * weights[m] * n_d
+    # a side that stays (resting, held, or not moved in the last round): no vertex of the
+    # other leaves it faster than it moves along n. The shares follow the weights, and a
+    # triangle's vertex of large weight overshot (the layers of a stack rose off each
+    # other at up to a third of the speed they fell with). Between two sides that move,
+    # the pushes and this change keep the pair's momentum, and a cap would not
+    still = (True, True)
+    for m in range(4):
+        if ims[m] > 0.0:
+            still = (False, still[1]) if m < ahead else (still[0], False)
     if not (still[0] or still[1]):
         return
-    # against a side that stays, no vertex leaves it faster than it moves along n: the
-    # shares follow the weights, and a triangle's vertex of large weight overshot (the
-    # layers of a stack rose off each other at up to a third of the speed they fell
-    # with). Between two sides that move, the pushes and this change keep the pair's
-    # momentum, and a cap would not
+    alongs = (qd[0, verts[0]] * nx + qd[1, verts[0]] * ny + qd[2, verts[0]] * nz,
+              qd[0, verts[1]] * nx + qd[1, verts[1]] * ny + qd[2, verts[1]] * nz,
+              qd[0, verts[2]] * nx + qd[1, verts[2]] * ny + qd[2, verts[2]] * nz,
+              qd[0, verts[3]] * nx + qd[1, verts[3]] * ny + qd[2, verts[3]] * nz)
     sides = (0.0, 0.0)
     for m in range(4):
-        along = qd[0, verts[m]] * nx + qd[1, verts[m]] * ny + qd[2, verts[m]] * nz
-        sides = (sides[0] + weights[m] * along, sides[1]) if m < ahead else \
-            (sides[0], sides[1] - weights[m] * along)
+        sides = (sides[0] + weights[m] * alongs[m], sides[1]) if m < ahead else \
+            (sides[0], sides[1] - weights[m] * alongs[m])
     for m in range(4):
         if shares[m] == 0.0:
             continue
-        along = qd[0, verts[m]] * nx + qd[1, verts[m]] * ny + qd[2, verts[m]] * nz
-        excess = along - sides[1] if m < ahead else along - sides[0]
+        excess = alongs[m] - sides[1] if m < ahead else alongs[m] - sides[0]
         if (excess > 0.0) == (m < ahead) and excess != 0.0:
             for d, n_d in ((0, nx), (1, ny), (2, nz)):
                 qd[d, verts[m]] -= excess * n_d
