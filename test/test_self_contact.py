@@ -14,14 +14,16 @@ from hcloth_ros.core import ClothBuilder, Control, make_scene, make_solver, Stat
 from hcloth_ros.core import kernels
 from hcloth_ros.core.kernels.self_contact import (_edge_side, _fresh_blocks, _may_cross,
                                                   _pair_side, _resolve, _resolve_passes,
-                                                  _triangle, MAX_SUBSTEPS, MIN_SUBSTEPS,
-                                                  obstacle_supports, ON_EDGE, patch_cache,
-                                                  RESOLVE_PASSES, RING, SLACK, SUB)
+                                                  _triangle, carry, MAX_SUBSTEPS,
+                                                  MIN_SUBSTEPS, obstacle_supports, ON_EDGE,
+                                                  patch_cache, REACH, RESOLVE_PASSES, RING,
+                                                  SLACK, SUB)
 import numpy as np
 import pytest
 
 THICKNESS = 0.005
 H = 1.0 / 60.0
+UP = np.array([0.0, 0.0, 1.0])      # against the solvers' default gravity
 
 
 def triangles(rows, cols):
@@ -236,7 +238,8 @@ def _run_kernel(lv, start, end, qd, friction):
     result = kernels.self_contact(end, qd, dv, start, lv.mass,
                                   np.zeros(lv.shape, dtype=np.int8),
                                   np.ones(lv.shape, dtype=np.bool_), _no_support(lv),
-                                  THICKNESS, friction, 4, H, 10.0, *patch_cache(*lv.shape), False)
+                                  THICKNESS, friction, 4, H, 10.0, UP,
+                                  *patch_cache(*lv.shape), False)
     return dv, result
 
 
@@ -311,7 +314,8 @@ def test_kernel_leaves_a_sheet_with_nothing_near_bit_for_bit():
     pairs, _, _ = kernels.self_contact(end, qd, dv, start, lv.mass,
                                        np.zeros(lv.shape, dtype=np.int8),
                                        np.ones(lv.shape, dtype=np.bool_), _no_support(lv),
-                                       THICKNESS, 0.3, 4, H, 10.0, *patch_cache(*lv.shape), False)
+                                       THICKNESS, 0.3, 4, H, 10.0, UP,
+                                       *patch_cache(*lv.shape), False)
     assert pairs == 0
     assert np.array_equal(end, before) and not qd.any()
 
@@ -536,7 +540,7 @@ def test_a_call_told_which_points_moved_finds_what_a_whole_call_finds():
     hold, support = np.zeros(lv.shape, dtype=np.int8), _no_support(lv)
     every = np.ones(lv.shape, dtype=np.bool_)
     kernels.self_contact(end, qd, dv, start, lv.mass, hold, every, support, THICKNESS, 0.0,
-                         4, H, 10.0, *cache, False)
+                         4, H, 10.0, UP, *cache, False)
     assert violations(start, end, THICKNESS) == (0, 0)
     moved = np.zeros(lv.shape, dtype=np.bool_)
     upper, _ = _flat_rows(top)
@@ -545,9 +549,9 @@ def test_a_call_told_which_points_moved_finds_what_a_whole_call_finds():
     end[2, moved] -= 0.8 * THICKNESS
     whole = [a.copy() for a in (end, qd, dv)]
     told = kernels.self_contact(end, qd, dv, start, lv.mass, hold, moved, support,
-                                THICKNESS, 0.0, 4, H, 10.0, *cache, True)
+                                THICKNESS, 0.0, 4, H, 10.0, UP, *cache, True)
     every_pair = kernels.self_contact(*whole, start, lv.mass, hold, every, support,
-                                      THICKNESS, 0.0, 4, H, 10.0, *patch_cache(*lv.shape),
+                                      THICKNESS, 0.0, 4, H, 10.0, UP, *patch_cache(*lv.shape),
                                       False)
     assert told[0] >= moved.sum() and told == every_pair
     for mine, theirs in zip((end, qd, dv), whole):
@@ -618,10 +622,10 @@ def test_a_later_call_takes_the_sub_intervals_of_both_ends_longest_edges(tilt, s
     every = np.ones(lv.shape, dtype=np.bool_)
     first = kernels.self_contact(start.copy(), np.zeros_like(end), np.zeros_like(end), start,
                                  lv.mass, hold, every, support, THICKNESS, 0.0, 4, H, 10.0,
-                                 *cache, False)
+                                 UP, *cache, False)
     later = kernels.self_contact(end.copy(), np.zeros_like(end), np.zeros_like(end), start,
                                  lv.mass, hold, every, support, THICKNESS, 0.0, 4, H, 10.0,
-                                 *cache, True)
+                                 UP, *cache, True)
     assert first[1] == MIN_SUBSTEPS and later[1] == substeps(edge)
 
 
@@ -629,7 +633,9 @@ def test_resolve_passes_skip_only_pairs_nothing_moved():
     """
     The passes over a detection's pairs end bit for bit where testing every pair every pass ends.
 
-    They skip a pair found apart until a push moves one of its vertices. Random pairs
+    They skip a pair found apart until a push moves one of its vertices, and note the
+    triangle each point was last pushed up off (within 45 degrees of up), on its side
+    (``carry`` reads it). Random pairs
     between the points of a crumpled 9 x 9 patch, most of them violated, and shared
     vertices, so pushes undo each other and later passes have work.
     """
@@ -649,12 +655,13 @@ def test_resolve_passes_skip_only_pairs_nothing_moved():
             pairs.append((p, t))
     pairs = np.array(pairs, dtype=np.int64)
     sides = rng.choice([-2.0, -1.0, 1.0, 2.0], len(pairs))
-    mine = [a.copy() for a in (x1, qd, qd, support)] + [np.zeros(n, dtype=np.bool_)]
+    mine = [a.copy() for a in (x1, qd, qd, support)]
+    mine += [np.zeros(n, dtype=np.bool_), np.full(n, -1, dtype=np.int64)]
     theirs = [a.copy() for a in mine]
     for one_side in (False, True):
         _resolve_passes(x0, mine[0], mine[1], mine[2], inv_mass, mine[3], cols, pairs, sides,
                         len(pairs), THICKNESS, 0.3, H, one_side, mine[4],
-                        np.zeros((0, 2), dtype=np.int64), np.zeros(0), 0)
+                        np.zeros((0, 2), dtype=np.int64), np.zeros(0), 0, UP, mine[5])
         pushes = 0
         for _ in range(RESOLVE_PASSES):
             for (p, t), side in zip(pairs, sides):
@@ -662,6 +669,11 @@ def test_resolve_passes_skip_only_pairs_nothing_moved():
                             p, t, side, THICKNESS, 0.3, H, one_side):
                     pushes += 1
                     theirs[4][[p, *_triangle(t, cols)]] = True
+                    i, j, k = _triangle(t, cols)
+                    x = theirs[0]
+                    normal = np.cross(x[:, j] - x[:, i], x[:, k] - x[:, i])
+                    if np.sign(side) * normal[2] > np.sqrt(0.5) * np.linalg.norm(normal):
+                        theirs[5][p] = 2 * t + (side > 0.0)     # what the point lies on
         assert pushes > len(pairs)          # later passes pushed again
         for a, b in zip(mine, theirs):
             assert np.array_equal(a, b)
@@ -1067,7 +1079,7 @@ def test_a_stack_of_layers_falling_onto_the_one_on_the_ground_comes_to_rest():
     dv = np.zeros_like(end)
     kernels.self_contact(end, qd, dv, start, lv.mass, np.zeros(lv.shape, dtype=np.int8),
                          np.ones(lv.shape, dtype=np.bool_), support, THICKNESS, 0.3, 8, H,
-                         10.0, *patch_cache(*lv.shape), False)
+                         10.0, UP, *patch_cache(*lv.shape), False)
     assert violations(start, end, THICKNESS) == (0, 0)
     bottom = layer == 0
     assert np.array_equal(end[:, bottom], start[:, bottom])
@@ -1078,3 +1090,196 @@ def test_a_stack_of_layers_falling_onto_the_one_on_the_ground_comes_to_rest():
         assert abs(qd[2, rows].mean()) < 0.02 * approach
         assert np.abs(qd[2, rows]).max() < 0.2 * approach
         assert abs((end[2, rows] - margin).mean() / (m * gap) - 1.0) < 0.1
+
+
+def _lying_on(x, points, tri, below):
+    """
+    Return ``carry``'s notes for ``points``: the triangle of ``below`` each projects into.
+
+    ``2 t + 1`` on the side of the triangle's normal, ``2 t`` on the other (brute force
+    over the triangles marked in ``below``; -1 where none).
+    """
+    planes = _planes(x, tri)
+    notes = np.full(x.shape[1], -1, dtype=np.int64)
+    for p in points:
+        sd, inside = _where(x, p, planes)
+        hits = np.flatnonzero(inside & below)
+        if len(hits):
+            t = hits[np.argmin(np.abs(sd[hits]))]
+            notes[p] = 2 * t + (sd[t] > 0.0)
+    return notes
+
+
+def _layers_lying(ground, sink, slide=0.0):
+    """
+    Two layers of a 33 x 33 level, the top one ``1 + SLACK`` thicknesses above the other.
+
+    Over the step the top layer (clear of the turn) sank ``sink`` (m) and slid ``slide``
+    along x, at the speed that took it there; the bottom one, at the ground's margin
+    (``ground``) or hanging free at 1 m, and the turn stayed. Returns ``(level, start,
+    end, qd, support, notes, layer, scene margin)`` with ``carry``'s notes: the top
+    layer's points (clear of the turn) on the bottom layer's triangles under them.
+    """
+    model = folded_model(ground=0.0 if ground else None)
+    lv = model.level(2)
+    margin = model.scene.margin if ground else 0.0
+    gap = (1.0 + SLACK) * THICKNESS
+    start, layer = accordion(State.at_rest(model).q[2], margin if ground else 1.0, gap, 2)
+    top = layer == 1
+    # the top layer's points but those whose triangle under them is within RING rows
+    # (through the turn; the kernel does not test them either)
+    flat = np.zeros_like(top)
+    flat[np.flatnonzero(top)[RING + 1:]] = True
+    end, qd = start.copy(), np.zeros_like(start)
+    end[2][flat] -= sink
+    end[0][flat] += slide
+    qd[2][flat], qd[0][flat] = -sink / H, slide / H
+    support = _no_support(lv)
+    if ground:
+        obstacle_supports(model.scene.planes, model.scene.boxes, margin, end, support)
+    tri = triangles(*lv.shape)
+    rows = np.repeat(layer, lv.shape[1])
+    below = (rows[tri] == 0).all(axis=1)
+    points = np.flatnonzero(np.repeat(flat, lv.shape[1]))
+    notes = _lying_on(start.reshape(3, -1), points, tri, below)
+    return lv, start, end, qd, support, notes, layer, margin
+
+
+def _carry(lv, start, end, qd, support, notes, friction=0.0):
+    """Run ``carry`` under gravity along -z on ``end``; return its count and dv."""
+    dv = np.zeros_like(end)
+    count = carry(end, qd, dv, start, lv.mass, np.zeros(lv.shape, dtype=np.int8), support,
+                  notes, UP, THICKNESS, friction, H)
+    return count, dv
+
+
+def test_a_layer_lying_on_one_on_the_ground_is_carried_where_it_lay():
+    """
+    Its step's fall from rest, ``g h^2``, is undone: exactly where it lay, still.
+
+    The top layer of a cloth folded flat on the ground sank ``g h^2`` (2.7 mm at 60 Hz,
+    half the thickness) over a step, as any solver moves a point at rest. ``carry`` lifts
+    every point of it whose note names a triangle under it back to ``1 + SLACK``
+    thicknesses above that triangle, the bottom layer, on the ground, unmoved, and the
+    velocity the fall gave it gone: the detection after it finds nothing near (checked by
+    brute force). Without it each of those points is a pair, every step, as long as the
+    cloth lies there.
+    """
+    sink = 9.81 * H * H
+    lv, start, end, qd, support, notes, layer, margin = _layers_lying(True, sink)
+    noted = notes >= 0
+    assert noted.sum() > 0.3 * lv.rows * lv.cols
+    assert violations(start, end, THICKNESS)[0] > noted.sum()
+    count, _ = _carry(lv, start, end, qd, support, notes)
+    assert count == noted.sum()
+    x0, x1, v = start.reshape(3, -1), end.reshape(3, -1), qd.reshape(3, -1)
+    assert np.allclose(x1[:, noted], x0[:, noted], rtol=0.0, atol=1e-12)
+    assert np.all(np.abs(v[:, noted]) < 1e-9)
+    bottom = layer == 0
+    assert np.array_equal(end[:, bottom], start[:, bottom])
+    assert violations(start, end, THICKNESS) == (0, 0)
+
+
+def test_a_layer_lying_on_a_hanging_one_weighs_it_down_keeping_momentum():
+    """
+    With nothing under the lower layer the push is shared: momentum is kept, none is lost.
+
+    The lower layer hangs free (nothing holds it, as a layer between two grasps would):
+    the upper one, half its fall into it, is pushed up and the lower one down (by the
+    inverse masses, as self-contact's pushes are), each point to ``1 + SLACK``
+    thicknesses above its triangle's plane or more (later pushes move a triangle's
+    vertices further down); the sum of ``m v`` over the level does not change, and the
+    lower layer moves down. (What the shared pushes leave near elsewhere, the lower
+    layer's points under the upper one's triangles, is the detection's.)
+    """
+    sink = 0.5 * 9.81 * H * H
+    lv, start, end, qd, support, notes, layer, _ = _layers_lying(False, sink)
+    mass = lv.mass.reshape(-1)
+    before = (mass * qd.reshape(3, -1)).sum(axis=1)
+    bottom_z = end[2, layer == 0].copy()
+    count, _ = _carry(lv, start, end, qd, support, notes)
+    assert count > 0.9 * (notes >= 0).sum()
+    after = (mass * qd.reshape(3, -1)).sum(axis=1)
+    assert np.allclose(after, before, rtol=0.0, atol=1e-12 * np.abs(before).max())
+    assert np.all(end[2, layer == 0] <= bottom_z) and \
+        (bottom_z - end[2, layer == 0]).mean() > 0.2 * sink
+    x = end.reshape(3, -1)
+    tri = triangles(*lv.shape)
+    for p in np.flatnonzero(notes >= 0):
+        i, j, k = tri[notes[p] // 2]
+        n = np.cross(x[:, j] - x[:, i], x[:, k] - x[:, i])
+        above = (x[:, p] - x[:, i]) @ n / np.linalg.norm(n) * (1 if notes[p] % 2 else -1)
+        assert above >= (1.0 + SLACK) * THICKNESS * (1.0 - 1e-9)
+
+
+def test_friction_under_a_points_weight_takes_mu_g_h_off_its_sliding_a_step():
+    """
+    Coulomb's law under the weight: ``mu m g`` of friction, ``mu g h`` of speed a step.
+
+    The top layer slides at 1 m/s over the bottom one lying on the ground (friction 0.3
+    between the layers): its step's fall is undone and its speed along x falls by
+    ``0.3 * 9.81 / 60`` = 4.9 cm/s exactly (to rounding); slower than that, it stops.
+    """
+    sink, mu = 9.81 * H * H, 0.3
+    for speed, left in ((1.0, 1.0 - mu * 9.81 * H), (0.02, 0.0)):
+        lv, start, end, qd, support, notes, _, _ = _layers_lying(True, sink, speed * H)
+        # (the last column slides past the lower layer's edge in the step and falls)
+        noted = (notes >= 0) & (np.arange(notes.size) % lv.cols < lv.cols - 1)
+        _carry(lv, start, end, qd, support, notes, mu)
+        vx = qd.reshape(3, -1)[0, noted]
+        assert np.allclose(vx, left, rtol=0.0, atol=1e-9)
+
+
+def test_a_point_carried_is_followed_to_the_triangle_under_it_and_let_go_when_lifted():
+    """
+    The note walks with the point (up to ``WALKS`` triangles a step) and is dropped off it.
+
+    Notes naming the triangle a cell along from one under the point (two triangles'
+    walk) are moved to one the point's projection lies in (the top layer's points lie
+    over the bottom one's columns, on the edges between two cells: either cell), on the
+    same side; points lifted ``REACH`` thicknesses and more off their triangle lose theirs.
+    """
+    lv, start, end, qd, support, notes, layer, _ = _layers_lying(True, 9.81 * H * H)
+    cols = lv.cols
+    noted = np.flatnonzero(notes >= 0)
+    inner = [p for p in noted if 4 <= p % cols < cols - 6]
+    moved = notes.copy()
+    for p in inner:
+        moved[p] = notes[p] + 4       # a cell along the row, the same side
+    _carry(lv, start, end.copy(), qd.copy(), support.copy(), moved)
+    planes = _planes(start.reshape(3, -1), triangles(*lv.shape))
+    for p in inner:
+        assert moved[p] != notes[p] + 4 and moved[p] % 2 == notes[p] % 2
+        assert _where(start.reshape(3, -1), p, planes)[1][moved[p] // 2]
+    lifted = start.copy()
+    lifted[2, layer == 1] += REACH * THICKNESS
+    dropped = notes.copy()
+    _carry(lv, lifted, lifted.copy(), np.zeros_like(qd), support.copy(), dropped)
+    assert np.all(dropped[noted] == -1)
+
+
+def test_a_folded_cloth_at_rest_costs_no_pairs_once_carried():
+    """
+    A cloth lying folded on the ground, stepped (``hierarchical``): its top layer lies still.
+
+    The 33 x 33 cloth folded flat, its top layer ``1 + SLACK`` thicknesses above the
+    bottom one on the ground. Over the first steps the detection pushes the top layer's
+    points up off the layer below and ``carry`` takes them on; over steps 31-45 the first
+    detection of every step finds no pair at all (before, 1,835-2,439 a step: the top
+    layer sank into the bottom one every step), and nothing is near or crossed after any
+    step.
+    """
+    model = folded_model()
+    gap = (1.0 + SLACK) * THICKNESS
+    state = State.at_rest(model)
+    for k in range(model.level_count):
+        state.q[k], layer = accordion(state.q[k], model.scene.margin, gap, 2)
+    solver = make_solver('hierarchical', model, thickness=THICKNESS)
+    control, found = Control(model), []
+    for _ in range(45):
+        before = state.q[2].copy()
+        report = solver.step(state, control, H)
+        assert report.ok, report.reason
+        found.append(report.extra['self_contact_pairs'])
+        assert violations(before, state.q[2], THICKNESS) == (0, 0)
+    assert found[0] > 1000 and found[30:] == [0] * 15

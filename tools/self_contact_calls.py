@@ -2,12 +2,14 @@
 Self-contact's kernel calls step by step on the contact bench's folded drop.
 
     .venv/bin/python tools/self_contact_calls.py [--size 129] [--steps 60] [--every 5] \
-        [--contact-strain jacobi]
+        [--contact-strain jacobi] [--solver hierarchical]
 
-The folded cloth of ``hcloth_contact_bench`` (``multigrid``, thickness 4 mm, one numba
-thread) falls onto the ground; each self-contact kernel call of the finest level is timed
-and printed with the pairs its first detection found, how many points it was told had
-moved and whether it kept the patch boxes of the call before. Last, the median of a
+The folded cloth of ``hcloth_contact_bench`` (``multigrid`` or ``--solver``, thickness
+4 mm, one numba thread) falls onto the ground; each self-contact kernel call of the
+finest level is timed and printed with the pairs its first detection found, how many
+points it was told had moved and whether it kept the patch boxes of the call before,
+and the step's ``carry`` (the layers lying on each other kept on them before the
+detection, every step) with the points it moved. Last, the median of a
 step's kernel time (a step makes one call or more: the step's own, the ones after its
 strain limiting, and the one after the ground's rounds of strain limiting and contact)
 over all steps and over the steps from 21 on, its mean, 90th percentile and largest, and
@@ -17,7 +19,8 @@ contact (at 129 x 129 they touch at steps 3-5, land at steps 26-33, lie apart un
 step 48 and slide over each other until step 120 as the folded cloth opens, its bending
 springs resting flat; the medians over all steps hold the steps they are apart); then
 where the middle column's edges are. ``--contact-strain`` picks the contact rounds'
-strain limiting (the solver's ``contact_strain``, default its own).
+strain limiting (the solver's ``contact_strain``, default its own). The kernel time of a
+step counts its calls and its ``carry``; the median of ``carry`` alone comes last.
 """
 
 import argparse
@@ -34,13 +37,15 @@ def main(argv=None):
     parser.add_argument('--every', type=int, default=5, help='print every n-th step')
     parser.add_argument('--contact-strain', choices=('tangent', 'jacobi'),
                         help="the contact rounds' strain limiting (default: the solver's)")
+    parser.add_argument('--solver', default='multigrid', choices=('multigrid', 'hierarchical'))
     args = parser.parse_args(argv)
     numba.set_num_threads(1)
     from hcloth_ros.bench.self_contact import in_contact, scene_setup
     from hcloth_ros.core import make_solver
+    from hcloth_ros.core import self_contact as wrapper
     model, state, control = scene_setup(args.size, 'folded')
     options = {} if args.contact_strain is None else {'contact_strain': args.contact_strain}
-    solver = make_solver('multigrid', model, thickness=0.004, **options)
+    solver = make_solver(args.solver, model, thickness=0.004, **options)
     solver.step(state, control, 1 / 60)            # compile or load
     finest = model.level_count - 1
     kit = solver.kernels(finest)
@@ -60,14 +65,28 @@ def main(argv=None):
             return timed if name == 'self_contact' else getattr(kit, name)
 
     solver._kits[finest] = Timed()
+    kernel_carry, carries = wrapper.carry, []
+
+    def carry(*arguments):
+        start = time.perf_counter()
+        moved = kernel_carry(*arguments)
+        carries[-1] = (time.perf_counter() - start, moved)
+        return moved
+
+    wrapper.carry = carry
     for step in range(args.steps):
         calls.append([])
+        carries.append((0.0, 0))
         solver.step(state, control, 1 / 60)
         if step % args.every == 0:
             print(f'step {step + 1}: ' + ' | '.join(
                 f'{1e3 * t:.2f} ms, {pairs} pairs, {moved} moved, boxes kept {kept}'
-                for t, pairs, moved, kept in calls[-1]), flush=True)
-    totals = [1e3 * sum(c[0] for c in step) for step in calls]
+                for t, pairs, moved, kept in calls[-1])
+                + f'; carry {1e3 * carries[-1][0]:.2f} ms, {carries[-1][1]} points moved',
+                flush=True)
+    wrapper.carry = kernel_carry
+    totals = [1e3 * (sum(c[0] for c in step) + carried[0])
+              for step, carried in zip(calls, carries)]
     later = [1e3 * sum(c[0] for c in step[1:]) for step in calls]
     settled = (f'{np.median(totals[20:]):.2f} ms from step 21 on' if len(totals) > 20
                else 'no steps from step 21 on')
@@ -83,6 +102,8 @@ def main(argv=None):
         print(f'the {len(touching)} steps whose first detection found pairs: kernel a step '
               f'median {np.median(touching):.2f} ms, mean {np.mean(touching):.2f} ms, '
               f'90th percentile {np.percentile(touching, 90):.2f} ms')
+    print(f'carry: median {1e3 * np.median([c[0] for c in carries]):.3f} ms a step, '
+          f'{np.median([c[1] for c in carries]):.0f} points moved')
     # whether the cloth is still folded: the fold starts with its far edge over its near one
     q, ground = state.q[finest], model.scene.planes[0, 3]
     middle = q[:, :, q.shape[2] // 2]

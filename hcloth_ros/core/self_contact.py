@@ -7,7 +7,7 @@ This module decides which level, between which positions, and what the coarser l
 afterwards.
 """
 
-from hcloth_ros.core.kernels.self_contact import obstacle_supports, patch_cache
+from hcloth_ros.core.kernels.self_contact import carry, obstacle_supports, patch_cache
 import numpy as np
 
 # Rounds of self-contact and strain limiting a check runs at most (see SelfContact.apply).
@@ -35,6 +35,13 @@ def thickness_warning(model, thickness):
             f'{model.height:g} m): self-contact misses folds tighter than a few '
             f'spacings; keep the thickness under about half the spacing '
             f'({0.5 * spacing:.2g} m), or use fewer levels or a coarser cloth.resolution')
+
+
+def _up(model):
+    """Return the unit vector against the model's gravity (zero without gravity)."""
+    g = np.asarray(model.gravity, dtype=np.float64)
+    norm = np.linalg.norm(g)
+    return -g / norm if norm > 0.0 else np.zeros(3)
 
 
 def supports(scene, q, out):
@@ -114,6 +121,8 @@ class SelfContact:
         move single points: strain limiting (if the solver has it) spreads them to their
         neighbours, then contact runs again, as it may have pulled points back in, up to
         ``ROUNDS`` times. Returns the pairs found, or None when this step does not check.
+        Before it, every step, checked or not, the points lying on a layer are kept on it
+        (:meth:`_carry`), so that a layer at rest on another is not found in it again.
 
         ``moved`` (a mask of the level's points), for a second call in the same step: the
         points moved since the last call, which left nothing near; the first detection
@@ -130,7 +139,10 @@ class SelfContact:
         (issue 10's note).
         """
         k = levels[-1]
+        carried = self._carry(solver, k, state, holds, h) if moved is None else 0
         if not self._due(k, state):
+            if carried:
+                solver._inject_down(levels)
             return None
         lv, kit = solver.model.level(k), solver.kernels(k)
         start = state.q[k] if self._start is None else self._start
@@ -149,7 +161,8 @@ class SelfContact:
             found, _, lost = kit.self_contact(
                 solver._q[k], solver._qd[k], solver._dv[k], start, lv.mass, holds.kind, mask,
                 support, self.thickness, self.friction, self.iterations, span,
-                max(solver.model.width, solver.model.height), *self._patches,
+                max(solver.model.width, solver.model.height), _up(solver.model),
+                *self._patches,
                 attempt > 0 or moved is not None)
             if found < 0:
                 solver._extra['self_contact_refused'] = True
@@ -170,9 +183,30 @@ class SelfContact:
                 break
         if dropped:
             solver._extra['self_contact_dropped'] = dropped
-        if pairs:
+        if pairs or carried:
             solver._inject_down(levels)
         return pairs
+
+    def _carry(self, solver, k, state, holds, h):
+        """
+        Let the layers the points lie on carry them this step (kernel ``carry``); return how many.
+
+        Every step, checked or not. What a point lies on is known from the pushes of the
+        checks before (the kernel notes them); after a reset or a change of the finest
+        level it is forgotten. ``self_contact_carried`` in the step's report: the points
+        carried.
+        """
+        lv = solver.model.level(k)
+        _, _, support = self._buffers(lv.shape)
+        lies_on = self._patches[-1]
+        if self._key != (k, state.time):
+            lies_on[:] = -1     # (the kernel still runs: a solver's first step compiles it)
+        supports(solver.model.scene, solver._q[k], support)
+        count = carry(solver._q[k], solver._qd[k], solver._dv[k], state.q[k], lv.mass,
+                      holds.kind, support, lies_on, _up(solver.model), self.thickness,
+                      self.friction, h)
+        solver._extra['self_contact_carried'] = count
+        return count
 
     def _buffers(self, shape):
         """Return the moved-points mask, a positions copy and the supports of a level."""

@@ -52,9 +52,10 @@ strain limiting in the contact rounds along the obstacles' surfaces (``contact_s
     test_the_tangent_strain_limiting_keeps_a_spring_across_an_edge_on_its_faces``
 contact with moving bodies (boxes, spheres, capsules; friction against their surface velocity)
     ``bodies.body_contact``; closed-form geometry and Coulomb's law; ``test_bodies``
-self-contact (thickness, crossings during a step, friction between layers)
-    ``self_contact.self_contact``; a brute-force check over every point and triangle;
-    ``test_self_contact``
+self-contact (thickness, crossings during a step, friction between layers; layers lying
+on each other carried from step to step)
+    ``self_contact.self_contact``, ``self_contact.carry``; a brute-force check over every
+    point and triangle, Coulomb's law under a point's weight; ``test_self_contact``
 strain and finiteness (the blow-up check), energy
     ``stats.strain_stats``, ``stats.energy``; inline; ``test_kernel_equivalence::
     test_strain_stats``, the energy checks of ``test_physics`` and ``test_implicit``

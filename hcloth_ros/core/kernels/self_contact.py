@@ -67,6 +67,13 @@ layers on the ground is resolved from the bottom up, as shock propagation resolv
 of rigid bodies. An edge pair moves the two edges' closest points apart the same way
 (weights ``1 - s, s`` and ``1 - t, t``, along the edges' common normal to the side they
 came from, or the line between the closest points), without friction.
+
+Layers lying on each other (:func:`carry`, before a step's detection): a point pushed up
+off a triangle (its normal within 45 degrees of up) is noted as lying on it, followed
+from step to step across the grid's triangles, and pushed back up off it to ``1 + SLACK``
+thicknesses at the end of each step, friction included, as the detection would push
+that pair, but without detecting it: a layer at rest on another sank into it every step
+under gravity, every point of it a pair, and now lies still.
 """
 
 import math
@@ -107,6 +114,12 @@ UPWARD = math.sqrt(0.5)
 # How far (in thicknesses) a point on a triangle's plane may lie outside it and still
 # cross it (see _crossing for the figures behind it).
 ON_EDGE = 0.3
+# A point lying on a triangle of its own level, tracked from step to step (see carry):
+# its projection may walk this many triangles a step, ends within INSIDE (barycentric) of
+# the triangle, and lies at most REACH thicknesses above it; farther, it has left it.
+WALKS = 3
+INSIDE = 0.05
+REACH = 2.0
 # Pairs a step may hold per point (beyond it the rest of the step's pairs are dropped and
 # the count says so).
 PAIRS_PER_POINT = 8
@@ -1646,18 +1659,38 @@ def _resolve(x0, x1, qd, dv, inv_mass, support, cols, p, t, side, thickness, fri
     if not denom > 0.0:
         return False
     if friction > 0.0:
-        push = lam * (ip + u * u * ii + v * v * ij + w * w * ik)
-        rx, ry, rz = rx + push * nx, ry + push * ny, rz + push * nz
-        rn = rx * nx + ry * ny + rz * nz
-        rx, ry, rz = rx - rn * nx, ry - rn * ny, rz - rn * nz
-        slide = math.sqrt(rx * rx + ry * ry + rz * rz)
-        if slide > 0.0:
-            stop = min(slide, friction * -gap) / denom / slide
-            # nor does friction drag a vertex into its obstacle
-            for idx, wt in ((p, -stop * ip), (i, stop * ii * u), (j, stop * ij * v),
-                            (k, stop * ik * w)):
-                _move(x1, qd, dv, idx, _room(support, idx, wt, rx, ry, rz), rx, ry, rz, h)
+        _rub(x1, qd, dv, support, verts, (u, v, w), (ip, ii, ij, ik), lam, denom,
+             (rx, ry, rz), (nx, ny, nz), friction * -gap, h)
     return True
+
+
+@numba.njit(**JIT)
+def _rub(x1, qd, dv, support, verts, uvw, ims, lam, denom, motion, n, most, h):
+    """
+    Friction after a point-triangle push: up to ``most`` (m) off the pair's sliding.
+
+    ``motion``: the point's motion relative to the triangle's point over the step before
+    the push (:func:`_motion`), ``lam``, ``denom`` and ``ims`` the push's (:func:`_push`),
+    ``uvw`` the triangle's weights, ``n`` the push's direction. The sliding left after
+    the push (its part across n) is taken off, at most ``most`` of it, shared by inverse
+    masses, and that move divided by ``h`` off the velocities.
+    """
+    p, i, j, k = verts
+    u, v, w = uvw
+    ip, ii, ij, ik = ims
+    nx, ny, nz = n
+    push = lam * (ip + u * u * ii + v * v * ij + w * w * ik)
+    rx, ry, rz = motion[0] + push * nx, motion[1] + push * ny, motion[2] + push * nz
+    rn = rx * nx + ry * ny + rz * nz
+    rx, ry, rz = rx - rn * nx, ry - rn * ny, rz - rn * nz
+    slide = math.sqrt(rx * rx + ry * ry + rz * rz)
+    if not slide > 0.0:
+        return
+    stop = min(slide, most) / denom / slide
+    # nor does friction drag a vertex into its obstacle
+    for idx, wt in ((p, -stop * ip), (i, stop * ii * u), (j, stop * ij * v),
+                    (k, stop * ik * w)):
+        _move(x1, qd, dv, idx, _room(support, idx, wt, rx, ry, rz), rx, ry, rz, h)
 
 
 @numba.njit(**JIT)
@@ -1734,17 +1767,19 @@ def self_contact(
         # margin (shape (4, rows, cols); normal zero: none), the room used up in place
         q_prev, mass, hold_kind, moved, support,
         # inputs: cloth thickness (m), friction coefficient, resolution passes, step (s),
-        # the longest move against the level's mean motion a step may hold (m)
-        thickness, friction, iterations, h, max_move,
+        # the longest move against the level's mean motion a step may hold (m), the unit
+        # vector against gravity (what a point lies on is below it)
+        thickness, friction, iterations, h, max_move, up,
         # in / out: the patches' boxes, ends and cones and the patches the last call moved
         # points of (:func:`patch_cache`); whether they hold this step's boxes as of the
         # last call, but at the patches of those points and of the points marked moved
         # (False: every patch is computed); the blocks' boxes of those patches and whether
         # each patch has them; the longest edge at the start positions; the creases' flags
         # (bit 1: at the start positions, bit 2: at the end) and whether each patch has
-        # them at the start and at the end
+        # them at the start and at the end; the triangle each point was last pushed off
+        # (see carry and _resolve_passes)
         boxes, ends, cones, touched, subs, subs_ready, start_edge, crease, crease_ready,
-        reuse):
+        carried, reuse):
     """
     Keep a level's points ``thickness`` away from its triangles (see the module docstring).
 
@@ -1759,10 +1794,7 @@ def self_contact(
         return 0, 0, 0
     x1, x0 = q.reshape((3, n)), q_prev.reshape((3, n))
     qdf, dvf, held_up = qd.reshape((3, n)), dv.reshape((3, n)), support.reshape((4, n))
-    inv_mass = np.empty(n)
-    for r in range(rows):
-        for c in range(cols):
-            inv_mass[r * cols + c] = 0.0 if hold_kind[r, c] != FREE else 1.0 / mass[r, c]
+    inv_mass = _inverse_masses(mass, hold_kind)
     # the mean displacement; sub-intervals so that no point moves more than half the
     # longest edge relative to it in one
     shift = _mean_move(x0, x1)
@@ -1842,7 +1874,7 @@ def self_contact(
         fresh[:] = False
         _resolve_passes(x0, x1, qdf, dvf, inv_mass, held_up, cols, pairs, sides, kept,
                         target, friction, h, attempt == iterations, fresh, edge_pairs,
-                        edge_sides, edges_kept)
+                        edge_sides, edges_kept, up, carried)
         fresh_blocks = _fresh_blocks(fresh, rows, cols)
         _dirty_patches(fresh_blocks, dirty)
         stale[:, :] = dirty
@@ -1852,11 +1884,17 @@ def self_contact(
 
 @numba.njit(**JIT)
 def _resolve_passes(x0, x1, qd, dv, inv_mass, support, cols, pairs, sides, kept, target,
-                    friction, h, one_side, fresh, edge_pairs, edge_sides, edges_kept):
+                    friction, h, one_side, fresh, edge_pairs, edge_sides, edges_kept,
+                    up, carried):
     """
     ``RESOLVE_PASSES`` Gauss-Seidel passes over the pairs; mark in ``fresh`` the points they move.
 
-    Each pass takes the point-triangle pairs, then the ``edges_kept`` edge pairs.
+    Each pass takes the point-triangle pairs, then the ``edges_kept`` edge pairs. A point
+    pushed up off a triangle (the triangle's normal on its side within 45 degrees,
+    ``UPWARD``, of ``up``) is noted in ``carried`` as lying on it (``2 t + 1`` on the side
+    of its normal, ``2 t`` on the other; the last such push wins; see :func:`carry`). (Any
+    push noted, a layer between two others, pushed down by the one above after it was
+    pushed up, was noted on the one above, and was not carried.)
 
     A pair found apart is not tested again until a push moves one of its vertices: the
     test would find it apart again and do nothing, so the result is the same bit for bit
@@ -1876,6 +1914,8 @@ def _resolve_passes(x0, x1, qd, dv, inv_mass, support, cols, pairs, sides, kept,
             if _resolve(x0, x1, qd, dv, inv_mass, support, cols, p, t, sides[e], target,
                         friction, h, one_side):
                 pushes += 1
+                if _faces(x1, i, j, k, sides[e], up):
+                    carried[p] = 2 * t + (1 if sides[e] > 0.0 else 0)
                 for v in (p, i, j, k):
                     fresh[v] = True
                     stamps[v] = pushes
@@ -1893,20 +1933,226 @@ def _resolve_passes(x0, x1, qd, dv, inv_mass, support, cols, pairs, sides, kept,
                     stamps[v] = pushes
 
 
+@numba.njit(**JIT)
+def _faces(x, i, j, k, side, up):
+    """Whether triangle (i, j, k)'s normal on ``side`` points within 45 degrees of ``up``."""
+    nx, ny, nz = _plane_distance(_point(x, i), _point(x, i), _point(x, j), _point(x, k))[1:]
+    sign = 1.0 if side > 0.0 else -1.0
+    return sign * (nx * up[0] + ny * up[1] + nz * up[2]) > UPWARD
+
+
+@numba.njit(**JIT)
+def _inverse_masses(mass, hold_kind):
+    """Return the points' inverse masses, flat (0 for held points)."""
+    rows, cols = hold_kind.shape
+    inv_mass = np.empty(rows * cols)
+    for r in range(rows):
+        for c in range(cols):
+            inv_mass[r * cols + c] = 0.0 if hold_kind[r, c] != FREE else 1.0 / mass[r, c]
+    return inv_mass
+
+
+@numba.njit(**JIT)
+def _next_to(t, vertex, rows, cols):
+    """
+    Return the triangle across triangle t's edge opposite its vertex ``vertex`` (0-2), or -1.
+
+    -1 on the grid's border. The two triangles of a cell (see the module docstring) and
+    their neighbours: the first's edges border the second (its diagonal), the cell on the
+    right's second and the cell above's second; the second's the first, the cell below's
+    first and the cell on the left's first.
+    """
+    cell = t // 2
+    r, c = cell // (cols - 1), cell % (cols - 1)
+    if t % 2 == 0:
+        if vertex == 1:
+            return t + 1
+        if vertex == 0:
+            return 2 * (cell + 1) + 1 if c + 1 <= cols - 2 else -1
+        return 2 * (cell - (cols - 1)) + 1 if r >= 1 else -1
+    if vertex == 2:
+        return t - 1
+    if vertex == 0:
+        return 2 * (cell + cols - 1) if r + 1 <= rows - 2 else -1
+    return 2 * (cell - 1) if c >= 1 else -1
+
+
+@numba.njit(**JIT)
+def _track(x, p, t, rows, cols):
+    """
+    Return the triangle p's projection lies in, walking from t across the grid, or -1.
+
+    With p's plane (:func:`_plane`'s seven numbers) of that triangle (zeros with -1).
+
+    At most ``WALKS`` triangles on, each across the edge beyond which the projection lies
+    farthest (its most negative barycentric weight); within ``INSIDE`` of a triangle is
+    in it. -1 when the walk leaves the grid, comes within ``RING`` rows and columns of p
+    (its own surface, see the module docstring) or does not arrive. All triangles of the
+    grid turn the same way, so p's side of the one it arrives at is its side of t's.
+    """
+    pr, pc = p // cols, p % cols
+    none = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+    for walked in range(WALKS + 1):
+        cell = t // 2
+        r, c = cell // (cols - 1), cell % (cols - 1)
+        if pr - 1 - RING <= r <= pr + RING and pc - 1 - RING <= c <= pc + RING:
+            return -1, none
+        i, j, k = _triangle(t, cols)
+        plane = _plane(_point(x, p), _point(x, i), _point(x, j), _point(x, k))
+        low = min(plane[4], plane[5], plane[6])
+        if low >= -INSIDE:
+            return t, plane
+        if walked == WALKS:
+            return -1, none
+        t = _next_to(t, 0 if plane[4] == low else (1 if plane[5] == low else 2), rows,
+                     cols)
+        if t < 0:
+            return -1, none
+    return -1, none
+
+
+@numba.njit(**JIT)
+def carry(q, qd, dv, q_prev, mass, hold_kind, support, carried, up, thickness, friction,
+          h):
+    """
+    Keep the points lying on a layer on it, before the step's detection; return how many moved.
+
+    ``q``, ``qd``, ``dv``: the level after the step (corrected in place), ``q_prev`` its
+    start; ``support``: the obstacles below (see :func:`self_contact`); ``carried``: the
+    triangle each point was last pushed up off (:func:`_resolve_passes`), updated here;
+    ``up``: the unit vector against gravity.
+
+    A layer lying on another sinks into it every step (``g h^2`` from rest; the solvers
+    do not know the layer below) and self-contact, finding it within the thickness,
+    pushed it out again: every point of it a pair, every step (33,000 pairs and 36 ms a
+    step on a folded 129 x 129 cloth at rest). Here each point is followed on the
+    triangle it was last pushed up off (:func:`_track` at the start positions, where the
+    last check left it; it has left the triangle when it lies on the other side or more
+    than ``REACH`` thicknesses above it) and, where that triangle faces up (within 45
+    degrees, ``UPWARD``), pushed back up to ``1 + SLACK`` thicknesses above it at the end
+    of the step (:func:`_bear`), as the detection would push that pair, without
+    detecting it: the layer below bears the point. The detection after it then finds
+    what else came near (a faster fall, a press, another layer's edge) and not, every
+    step, the whole layer. A stack is carried from the bottom up: a point after the
+    vertices of its triangle, so that each layer, once lifted off one that rests, rests
+    in turn (:func:`_come_to_rest`) and the next one up is lifted alone, as the
+    detection's pushes resolve a stack.
+    """
+    rows, cols = hold_kind.shape
+    n = rows * cols
+    if rows < 2 or cols < 2:
+        return 0
+    x1, x0 = q.reshape((3, n)), q_prev.reshape((3, n))
+    qdf, dvf, held_up = qd.reshape((3, n)), dv.reshape((3, n)), support.reshape((4, n))
+    inv_mass = _inverse_masses(mass, hold_kind)
+    # each point followed onto the triangle under it at the start; those lying on one
+    # that faces up wait for their turn
+    waiting = np.zeros(n, dtype=np.bool_)
+    for p in range(n):
+        code = carried[p]
+        if code < 0:
+            continue
+        side = 1.0 if code % 2 else -1.0
+        t, plane = _track(x0, p, code // 2, rows, cols)
+        if t < 0 or inv_mass[p] == 0.0:
+            carried[p] = -1
+            continue
+        above, nx, ny, nz = plane[0], plane[1], plane[2], plane[3]
+        if not 0.0 < side * above <= REACH * thickness:
+            carried[p] = -1
+            continue
+        carried[p] = 2 * t + code % 2
+        waiting[p] = side * (nx * up[0] + ny * up[1] + nz * up[2]) > UPWARD
+    # from the bottom of a stack up: a point's turn comes when no vertex of its triangle
+    # waits (it rests, or is carried already); what is left when no turn comes (points
+    # lying on each other in a ring) in the order of the points
+    count, left, ring = 0, int(waiting.sum()), False
+    while left:
+        turns = 0
+        for p in range(n):
+            if not waiting[p]:
+                continue
+            i, j, k = _triangle(carried[p] // 2, cols)
+            if not ring and (waiting[i] or waiting[j] or waiting[k]):
+                continue
+            waiting[p] = False
+            turns += 1
+            if _bear(x0, x1, qdf, dvf, inv_mass, held_up, p, carried[p] // 2,
+                     1.0 if carried[p] % 2 else -1.0, up, thickness, friction, rows, cols,
+                     h):
+                count += 1
+        left -= turns
+        ring = turns == 0
+    return count
+
+
+@numba.njit(**JIT)
+def _bear(x0, x1, qd, dv, inv_mass, support, p, t, side, up, thickness, friction, rows,
+          cols, h):
+    """
+    Push p up off the triangle under it (tracked from t, p on its ``side``) to 1 + SLACK.
+
+    Returns whether it pushed. See :func:`carry`. At the end of the step p is followed
+    again from t (:func:`_track`: it may have slid onto the next triangle; past the
+    layer's edge it falls freely). The push is self-contact's own (:func:`_push`: shared
+    by inverse masses, so a layer lying on a hanging layer weighs it down; held points and
+    points with no room left to their obstacle stay; inelastic), at p's projection
+    clipped into the triangle, along its normal, and so is the friction (:func:`_rub`, up
+    to ``friction`` times the push: under a point that only fell onto it, Coulomb's law
+    under its weight). A second push when the first left the pair short: a vertex of the
+    triangle that reached its obstacle on the way stopped there (:func:`_room`) and now
+    rests, so p moves alone. A point that ended more than a thickness below the plane, or
+    on a triangle that no longer faces up, is left to the detection.
+    """
+    t, plane = _track(x1, p, t, rows, cols)
+    if t < 0:
+        return False
+    i, j, k = _triangle(t, cols)
+    target = thickness * (1.0 + SLACK)
+    pushed = False
+    for again in range(2):
+        if again:
+            plane = _plane(_point(x1, p), _point(x1, i), _point(x1, j), _point(x1, k))
+        sd, nx, ny, nz, u, v, w = plane
+        sd, nx, ny, nz = side * sd, side * nx, side * ny, side * nz
+        if not (nx * up[0] + ny * up[1] + nz * up[2] > UPWARD and
+                -thickness < sd < target - ROOM_TOLERANCE):
+            break
+        lift = target - sd
+        u, v, w = max(u, 0.0), max(v, 0.0), max(w, 0.0)
+        total = u + v + w
+        if not total > 0.0:
+            break
+        u, v, w = u / total, v / total, w / total
+        verts, weights = (p, i, j, k), (1.0, -u, -v, -w)
+        motion = _motion(x0, x1, verts, weights)
+        lam, denom, ip, ii, ij, ik = _push(x1, qd, dv, inv_mass, support, verts, weights, 1,
+                                           nx, ny, nz, -lift, False)
+        if not denom > 0.0:
+            break
+        if friction > 0.0:
+            _rub(x1, qd, dv, support, verts, (u, v, w), (ip, ii, ij, ik), lam, denom, motion,
+                 (nx, ny, nz), friction * lift, h)
+        pushed = True
+    return pushed
+
+
 def patch_cache(rows, cols):
     """
-    Return what :func:`self_contact` keeps between a step's calls.
+    Return what :func:`self_contact` keeps between calls (:func:`carry` between steps).
 
     The patch boxes, ends, cones and moved patches, the blocks' boxes and which patches
     have theirs, the longest edge at the start positions, the creases' flags and which
-    patches have theirs at the start and at the end positions.
+    patches have theirs at the start and at the end positions, and the triangle each
+    point lies on (-1: none).
     """
     pr, pc = (rows - 2) // PATCH + 1, (cols - 2) // PATCH + 1
     blocks = ((rows - 2) // SUB + 1, (cols - 2) // SUB + 1)
     return (np.empty((pr, pc, 6)), np.empty((pr, pc, 15)), np.empty((pr, pc, 4)),
             np.zeros((pr, pc), dtype=np.bool_), np.empty(blocks + (15,)),
             np.zeros((pr, pc), dtype=np.bool_), np.zeros(1),
-            np.zeros(3 * rows * cols, dtype=np.uint8), np.zeros((pr, pc, 2), dtype=np.bool_))
+            np.zeros(3 * rows * cols, dtype=np.uint8), np.zeros((pr, pc, 2), dtype=np.bool_),
+            np.full(rows * cols, -1, dtype=np.int64))
 
 
 @numba.njit(**JIT)
