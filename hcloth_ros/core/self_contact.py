@@ -106,10 +106,14 @@ class SelfContact:
         step left it in time (a reset) or the finest level changed. A state edited
         without a change of time is not noticed.
         """
-        if self._key != (k, state.time):
+        if self._restarted(k, state):
             self._steps = 0
             self._start = state.q[k].copy() if self.interval > 1 else None
         return self._steps + 1 >= self.interval
+
+    def _restarted(self, k, state):
+        """Whether ``state`` is not where the last step left level k (a reset, another level)."""
+        return self._key != (k, state.time)
 
     def apply(self, solver, levels, state, holds, h, moved=None):
         """
@@ -138,8 +142,8 @@ class SelfContact:
         doubled the folded drop's largest strain (129 x 129) and got 257 x 257 refused
         (issue 10's note).
         """
-        k = levels[-1]
-        carried = self._carry(solver, k, state, holds, h) if moved is None else 0
+        k, up = levels[-1], _up(solver.model)
+        carried = self._carry(solver, k, state, holds, h, up) if moved is None else 0
         if not self._due(k, state):
             if carried:
                 solver._inject_down(levels)
@@ -161,8 +165,7 @@ class SelfContact:
             found, _, lost = kit.self_contact(
                 solver._q[k], solver._qd[k], solver._dv[k], start, lv.mass, holds.kind, mask,
                 support, self.thickness, self.friction, self.iterations, span,
-                max(solver.model.width, solver.model.height), _up(solver.model),
-                *self._patches,
+                max(solver.model.width, solver.model.height), up, *self._patches,
                 attempt > 0 or moved is not None)
             if found < 0:
                 solver._extra['self_contact_refused'] = True
@@ -187,7 +190,7 @@ class SelfContact:
             solver._inject_down(levels)
         return pairs
 
-    def _carry(self, solver, k, state, holds, h):
+    def _carry(self, solver, k, state, holds, h, up):
         """
         Let the layers the points lie on carry them this step (kernel ``carry``); return how many.
 
@@ -199,12 +202,11 @@ class SelfContact:
         lv = solver.model.level(k)
         _, _, support = self._buffers(lv.shape)
         lies_on = self._patches[-1]
-        if self._key != (k, state.time):
+        if self._restarted(k, state):
             lies_on[:] = -1     # (the kernel still runs: a solver's first step compiles it)
         supports(solver.model.scene, solver._q[k], support)
         count = carry(solver._q[k], solver._qd[k], solver._dv[k], state.q[k], lv.mass,
-                      holds.kind, support, lies_on, _up(solver.model), self.thickness,
-                      self.friction, h)
+                      holds.kind, support, lies_on, up, self.thickness, self.friction, h)
         solver._extra['self_contact_carried'] = count
         return count
 

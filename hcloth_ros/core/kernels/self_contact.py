@@ -1914,7 +1914,7 @@ def _resolve_passes(x0, x1, qd, dv, inv_mass, support, cols, pairs, sides, kept,
             if _resolve(x0, x1, qd, dv, inv_mass, support, cols, p, t, sides[e], target,
                         friction, h, one_side):
                 pushes += 1
-                if _faces(x1, i, j, k, sides[e], up):
+                if _faces(x1, t, sides[e], up, cols):
                     carried[p] = 2 * t + (1 if sides[e] > 0.0 else 0)
                 for v in (p, i, j, k):
                     fresh[v] = True
@@ -1934,11 +1934,11 @@ def _resolve_passes(x0, x1, qd, dv, inv_mass, support, cols, pairs, sides, kept,
 
 
 @numba.njit(**JIT)
-def _faces(x, i, j, k, side, up):
-    """Whether triangle (i, j, k)'s normal on ``side`` points within 45 degrees of ``up``."""
-    nx, ny, nz = _plane_distance(_point(x, i), _point(x, i), _point(x, j), _point(x, k))[1:]
-    sign = 1.0 if side > 0.0 else -1.0
-    return sign * (nx * up[0] + ny * up[1] + nz * up[2]) > UPWARD
+def _faces(x, t, side, up, cols):
+    """Whether triangle t's normal on ``side`` points within 45 degrees of ``up``."""
+    nx, ny, nz = _triangle_normal(x, t, cols)
+    along = (nx * up[0] + ny * up[1] + nz * up[2]) * (1.0 if side > 0.0 else -1.0)
+    return along > UPWARD * math.sqrt(nx * nx + ny * ny + nz * nz)
 
 
 @numba.njit(**JIT)
