@@ -3,7 +3,6 @@
 import os
 
 from hcloth_ros import params
-from hcloth_ros.demo import fold_client
 from hcloth_ros.demo import headless as demo
 import matplotlib.image as mpimg
 import numpy as np
@@ -121,30 +120,25 @@ def test_the_multigrid_solver_folds_the_cloth_without_tearing_it():
 
 
 @pytest.mark.parametrize('shed, restore', [(180, 270), (240, 330)])
-def test_a_level_shed_while_the_layers_meet_comes_back_without_crossing_them(
-        shed, restore, monkeypatch):
+def test_a_level_shed_while_the_layers_meet_comes_back_without_crossing_them(shed, restore):
     """
     The governor's case: 65 x 65 dropped at tick ``shed``, the fold goes on on 33 x 33.
 
     Brought back at tick ``restore`` (180 -> 270: while the grippers still carry the top
     layer; 240 -> 330: after they let go), the level starts from the prolonged 33 x 33
-    fold; at the end no top-layer point is below the bottom layer. Six seeds of
-    ``tools/fold_jitter.py --shed 180 --restore 270`` (and 240, 330) gave 0 below, the far
-    edge 0.0-0.1 cm and the crease 2.2-2.5 (1.8-1.9) cm from the middle: 33 x 33 lays the
-    crease while the finer level is shed, so its offset is allowed 3 cm here, not the
-    demo's 2. On the client's path before 2026-11-29 (42 cm high, 2 cm short: ``--lift
-    0.42 --stop-short 0.02``): on today's (45 cm, 1 cm short), whose crease lies 1.7-1.9 cm
-    from the middle, the level comes back with 5-8 top-layer points below the bottom
-    layer at the crease's ends by the side edges, from the first tick after the restore
-    (seeds 14-19; 0-3 at 43-44 cm): a 33 x 33 crease that tight is not a state the finer
-    level can be prolonged from without crossing (README, the fold demo; issue 10's note).
+    fold and is pushed out of itself (``SelfContact.settle``); at the end no top-layer
+    point is below the bottom layer and the demo's targets hold. Before ``settle`` the
+    33 x 33 crease, tighter than that level's ring, came back with 5-8 top-layer points
+    lying level with the bottom layer's first cell at the crease's ends by the side
+    edges, pushed under it by the first step, for good (seeds 14-19; this test ran the
+    client's earlier, looser path then). With it, ``tools/fold_jitter.py --shed 180
+    --restore 270`` (seeds 14-25) and ``--shed 240 --restore 330`` (seeds 14-19): 0
+    below, far edge 0.0-0.1 cm, crease 1.6-1.9 cm from the middle.
     """
-    monkeypatch.setattr(fold_client, 'LIFT', 0.42)
-    monkeypatch.setattr(fold_client, 'SHORT', 0.02)
     metrics = _fold_in_the_engine(17, shed=shed, restore=restore)
     assert metrics['side'] == 65
     assert metrics['top_below'] == 0
-    assert metrics['far_edge_moved'] <= 0.02 and metrics['fold_offset'] <= 0.03
+    assert metrics['far_edge_moved'] <= 0.02 and metrics['fold_offset'] <= 0.02
 
 
 def _fold_in_the_engine(seed, overrides=None, shed=None, restore=None):

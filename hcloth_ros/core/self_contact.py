@@ -210,6 +210,30 @@ class SelfContact:
         solver._extra['self_contact_carried'] = count
         return count
 
+    def settle(self, solver, k, state, holds):
+        """
+        Push level k, just restarted from the coarser level, out of its own triangles.
+
+        Returns the pairs found. The coarser level kept its points a thickness from its
+        triangles except within ``RING`` of its own rows and columns, twice as far on the
+        cloth as level k's ring: at a crease tighter than that the restarted level starts
+        with points lying level with, or in, the other layer's first cells, and nothing
+        tells which side they came from (the 33 x 33 fold demo's crease restored at 65 x
+        65 put 6-8 top-layer points below the bottom layer, for good). The kernel
+        (``settle``) puts each such point on the side its own surface lies on and pushes
+        the pairs apart, positions only, before the level's first step; the coarser
+        levels then take those positions where they share points.
+        """
+        lv, kit = solver.model.level(k), solver.kernels(k)
+        _, _, support = self._buffers(lv.shape)
+        supports(solver.model.scene, state.q[k], support)
+        pairs = kit.settle(state.q[k], lv.mass, holds.kind, support, self.thickness,
+                           self.iterations, *self._patches)
+        if pairs:
+            for fine in range(k, 0, -1):
+                kit.inject(state.q[fine], state.q[fine - 1])
+        return pairs
+
     def _buffers(self, shape):
         """Return the moved-points mask, a positions copy and the supports of a level."""
         if self._moved is None or self._moved.shape != tuple(shape):

@@ -546,11 +546,17 @@ class HierarchicalSolver(Solver):
         A level that comes back (not simulated while coarser ones moved on) restarts from
         the coarser level's state, positions and velocities prolonged, and the control
         re-takes its holds there (grasped points keep their place in the grasp frame).
+        With self-contact the finest of them is then pushed out of itself
+        (:meth:`SelfContact.settle`): the coarser level's crease may be tighter than it can
+        hold.
         """
         self.model.level(int(k))
-        for level in range(self._finest + 1, int(k) + 1):
+        restarted = range(self._finest + 1, int(k) + 1)
+        for level in restarted:
             prolong_state(state, level)
             control.recapture(state, level)
+        if self.self_contact is not None and len(restarted):
+            self.self_contact.settle(self, int(k), state, control.holds(int(k)))
         self.finest_level = k
         return self._finest
 

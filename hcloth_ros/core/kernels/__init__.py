@@ -53,9 +53,10 @@ strain limiting in the contact rounds along the obstacles' surfaces (``contact_s
 contact with moving bodies (boxes, spheres, capsules; friction against their surface velocity)
     ``bodies.body_contact``; closed-form geometry and Coulomb's law; ``test_bodies``
 self-contact (thickness, crossings during a step, friction between layers; layers lying
-on each other carried from step to step)
-    ``self_contact.self_contact``, ``self_contact.carry``; a brute-force check over every
-    point and triangle, Coulomb's law under a point's weight; ``test_self_contact``
+on each other carried from step to step; a level that comes back pushed out of itself)
+    ``self_contact.self_contact``, ``self_contact.carry``, ``self_contact.settle``; a
+    brute-force check over every point and triangle, Coulomb's law under a point's weight;
+    ``test_self_contact``
 strain and finiteness (the blow-up check), energy
     ``stats.strain_stats``, ``stats.energy``; inline; ``test_kernel_equivalence::
     test_strain_stats``, the energy checks of ``test_physics`` and ``test_implicit``
@@ -98,7 +99,7 @@ with keyed_cache():
                                                 PINNED, STENCIL_DC, STENCIL_DR,
                                                 STENCIL_SIZE)
     from hcloth_ros.core.kernels.multigrid import assemble_hierarchy, inject, multigrid_cg
-    from hcloth_ros.core.kernels.self_contact import self_contact
+    from hcloth_ros.core.kernels.self_contact import self_contact, settle
     from hcloth_ros.core.kernels.stats import energy, strain_stats, strain_stats_parallel
     from hcloth_ros.core.kernels.strain import (excess_threshold, strain_limit,
                                                 strain_limit_parallel)
@@ -107,8 +108,8 @@ KERNELS = ('anchor', 'assemble_hierarchy', 'body_contact', 'contact',
            'conjugate_gradient',
            'energy', 'eq6_first_sweep', 'eq6_second_sweep', 'eq7_level', 'excess_threshold',
            'explicit_step', 'inject', 'multigrid_cg', 'new_positions', 'newton_residual',
-           'points_by_id_f32', 'prescribe', 'prolong', 'self_contact', 'spring_forces',
-           'start_velocity', 'strain_limit', 'strain_stats', 'system_apply',
+           'points_by_id_f32', 'prescribe', 'prolong', 'self_contact', 'settle',
+           'spring_forces', 'start_velocity', 'strain_limit', 'strain_stats', 'system_apply',
            'system_diagonal', 'tangent_strain_limit')
 # Every kernel by name: SERIAL holds the serial builds, PARALLEL the parallel builds of
 # those that have one (jit.serial_and_parallel) and the serial build of the others.
@@ -132,7 +133,8 @@ __all__ = ['anchor', 'assemble_hierarchy', 'body_contact', 'builds', 'chunk_coun
            'eq6_first_sweep', 'eq6_second_sweep', 'eq7_level', 'eq7_level_parallel',
            'excess_threshold', 'explicit_step', 'FREE', 'inject', 'KERNELS', 'multigrid_cg',
            'new_positions', 'newton_residual', 'PAR_MIN_POINTS', 'PARALLEL', 'PINNED',
-           'points_by_id_f32', 'prescribe', 'prolong', 'SERIAL', 'self_contact', 'spring_forces',
+           'points_by_id_f32', 'prescribe', 'prolong', 'SERIAL', 'self_contact', 'settle',
+           'spring_forces',
            'start_velocity', 'STENCIL_DC', 'STENCIL_DR', 'STENCIL_SIZE', 'strain_limit',
            'strain_limit_parallel', 'strain_stats', 'strain_stats_parallel', 'system_apply',
            'system_apply_parallel', 'system_diagonal', 'tangent_strain_limit']

@@ -2137,6 +2137,107 @@ def _bear(x0, x1, qd, dv, inv_mass, support, p, t, side, up, thickness, friction
     return pushed
 
 
+@numba.njit(**JIT)
+def _surface_side(x, p, t, rows, cols):
+    """
+    Return the side (+-1) of triangle t's plane that p's own surface lies on, or 0.
+
+    The sum of the signed distances to the plane of p and of the points within ``RING``
+    rows and columns of it, the cloth round p (see :func:`settle`); 0 when they sum to
+    nothing (a degenerate triangle). Where two layers lie a thickness apart the cloth
+    round a point lies on its side; where a coarser level laid a point level with another
+    layer at a tight crease, its neighbours back from the crease still lie above.
+    """
+    i, j, k = _triangle(t, cols)
+    ax, ay, az = x[0, i], x[1, i], x[2, i]
+    ux, uy, uz = x[0, j] - ax, x[1, j] - ay, x[2, j] - az
+    vx, vy, vz = x[0, k] - ax, x[1, k] - ay, x[2, k] - az
+    nx, ny, nz = uy * vz - uz * vy, uz * vx - ux * vz, ux * vy - uy * vx
+    pr, pc = p // cols, p % cols
+    total = 0.0
+    for r in range(max(0, pr - RING), min(rows, pr + RING + 1)):
+        for c in range(max(0, pc - RING), min(cols, pc + RING + 1)):
+            q = r * cols + c
+            total += nx * (x[0, q] - ax) + ny * (x[1, q] - ay) + nz * (x[2, q] - az)
+    return 1.0 if total > 0.0 else (-1.0 if total < 0.0 else 0.0)
+
+
+@numba.njit(**JIT)
+def settle(q, mass, hold_kind, support, thickness, iterations, boxes, ends, cones, touched,
+           subs, subs_ready, start_edge, crease, crease_ready, carried):
+    """
+    Push a level restarted from the coarser one out of its own triangles; return the pairs found.
+
+    ``q`` (3, rows, cols) is corrected in place (velocities are not changed); ``support``
+    and the patch cache (:func:`patch_cache`, recomputed) as :func:`self_contact`'s.
+
+    A level that comes back is the coarser level's surface prolonged, and the coarser
+    level's self-contact skipped the triangles within ``RING`` of its rows and columns,
+    twice as far on the cloth as the finer level's: at a crease tighter than that the
+    coarser level may lay the two layers in each other's first cells (the fold demo's
+    33 x 33 crease left top-layer points on the ground in the bottom layer's first cell,
+    level with it). With no motion to tell which side such a point came from, a pair
+    found near takes the side the point's own surface lies on (:func:`_surface_side`),
+    not the side of the plane the point happens to be on, and is pushed apart as the
+    detection's pairs are: rounds of a static detection (the start positions the end
+    ones) and ``RESOLVE_PASSES`` passes, until none is found or ``iterations`` rounds
+    ran. A point more than about a thickness through the other layer is left as it is
+    (as :func:`_resolve` leaves it).
+    """
+    rows, cols = hold_kind.shape
+    n = rows * cols
+    if rows < 2 or cols < 2:
+        return 0
+    x = q.reshape((3, n))
+    if not np.all(np.isfinite(x)):
+        return 0
+    held_up = support.reshape((4, n))
+    inv_mass = _inverse_masses(mass, hold_kind)
+    qd, dv = np.zeros((3, n)), np.zeros((3, n))   # pushes move positions alone
+    subs_ready[:, :] = False
+    crease_ready[:, :, :] = False
+    crease_sine = min(1.0, 2.0 * thickness / max(_longest_edge(x, rows, cols), 1e-300))
+    crease_cosine = math.cos(2.0 * math.asin(crease_sine))
+    pairs = np.empty((PAIRS_PER_POINT * n, 2), dtype=np.int64)
+    sides = np.empty(PAIRS_PER_POINT * n)
+    edge_capacity = EDGE_PAIRS_PER_EDGE * 2 * (rows + cols) + n
+    edge_pairs = np.empty((edge_capacity, 2), dtype=np.int64)
+    edge_sides = np.empty(edge_capacity)
+    fresh = np.ones(n, dtype=np.bool_)
+    fresh_blocks = _fresh_blocks(fresh, rows, cols)
+    dirty = np.zeros(((rows - 2) // PATCH + 1, (cols - 2) // PATCH + 1), dtype=np.bool_)
+    _dirty_patches(fresh_blocks, dirty)
+    stale = dirty.copy()
+    first = -1
+    for attempt in range(iterations + 1):
+        _patch_boxes(x, x, rows, cols, PATCH, thickness, boxes, ends, cones, stale)
+        subs_ready &= ~stale
+        crease_ready[:, :, 0] &= ~stale
+        crease_ready[:, :, 1] &= ~stale
+        found, edges_found = _detect(x, x, rows, cols, thickness, MIN_SUBSTEPS, dirty, fresh,
+                                     fresh_blocks, pairs, sides, edge_pairs, edge_sides,
+                                     boxes, ends, cones, subs, subs_ready, crease, crease_ready,
+                                     crease_cosine)
+        kept = min(found, pairs.shape[0])
+        first = found + edges_found if first < 0 else first
+        if found + edges_found == 0:
+            break
+        for e in range(kept):
+            side = _surface_side(x, pairs[e, 0], pairs[e, 1], rows, cols)
+            if side != 0.0:
+                sides[e] = side
+        fresh[:] = False
+        _resolve_passes(x, x, qd, dv, inv_mass, held_up, cols, pairs, sides, kept,
+                        thickness * (1.0 + SLACK), 0.0, 1.0, attempt == iterations,
+                        fresh, edge_pairs, edge_sides, min(edges_found, edge_pairs.shape[0]),
+                        np.zeros(3), carried)
+        fresh_blocks = _fresh_blocks(fresh, rows, cols)
+        _dirty_patches(fresh_blocks, dirty)
+        stale[:, :] = dirty
+    touched[:, :] = True        # the boxes are the settled positions', not a step's
+    return first
+
+
 def patch_cache(rows, cols):
     """
     Return what :func:`self_contact` keeps between calls (:func:`carry` between steps).
