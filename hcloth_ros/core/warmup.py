@@ -58,10 +58,10 @@ def _exercise(model, solvers, parallel, energy, self_contact=False, bodies=False
     """
     Make every kernel call the configuration makes.
 
-    One step of each solver (and build), with self-contact (and a level dropped and brought
-    back) a moving body and the contact rounds' tangent strain limiting if asked, the
-    energy, a level restart. ``builds`` maps
-    ``'serial'`` and ``'parallel'`` to the kernel sets (default :mod:`kernels`' own).
+    One step of each solver (and build), with self-contact (then a level dropped and
+    brought back), a moving body and the contact rounds' tangent strain limiting if asked,
+    the energy, a level restart. ``builds`` maps ``'serial'`` and ``'parallel'`` to the
+    kernel sets (default :mod:`kernels`' own).
     """
     builds = builds or {'serial': kernels.SERIAL, 'parallel': kernels.PARALLEL}
     for name in SOLVERS if solvers is None else solvers:
