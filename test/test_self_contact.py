@@ -1352,6 +1352,45 @@ def test_a_point_carried_is_followed_to_the_triangle_under_it_and_let_go_when_li
     assert np.all(dropped[noted] == -1)
 
 
+@pytest.mark.parametrize('overhang, carried', [(0.25, True), (0.45, True), (0.75, False)])
+def test_a_free_edge_overhanging_the_one_it_lies_on_a_little_is_carried(overhang, carried):
+    """
+    A top layer's free edge on the bottom layer's, past it by ``overhang`` cells.
+
+    The 33 x 33 cloth folded flat on the ground ends with its top layer's free edge (its
+    last row) over the bottom layer's (its first row), as a cloth folded in half does.
+    Moved past it by a quarter or nearly half a cell, still within ``BEYOND`` of the
+    border triangle under it, the edge is carried: it sank ``g h^2`` and is put back
+    ``1 + SLACK`` thicknesses above the ground's margin (the layer below rests there),
+    the note kept. Three quarters of a cell past, it lies on nothing and falls on. Before
+    ``BEYOND`` the note was dropped as soon as the projection left the grid, and the
+    edge sank into the other every step (on the folded drop at rest, 60 of the 138 pairs
+    a step; one-off ``edge_pairs.py`` in issue 10's note).
+    """
+    sink = 9.81 * H * H
+    lv, start, end, qd, support, notes, _, margin = _layers_lying(True, sink)
+    rows, cols = lv.shape
+    edge = [(rows - 1) * cols + c for c in range(RING + 1, cols - RING - 1)]
+    gap = (1.0 + SLACK) * THICKNESS
+    assert np.allclose(start[1:, rows - 1], [[start[1, 0, 0]], [margin + gap]], atol=1e-12)
+    spacing = start[1, 1, 0] - start[1, 0, 0]
+    start[1, rows - 1] -= overhang * spacing       # towards -y: past the bottom's row 0
+    end[:, rows - 1] = start[:, rows - 1]
+    end[2, rows - 1] -= sink                        # its fall from rest over the step
+    qd[2, rows - 1] = -sink / H
+    for p in edge:
+        notes[p] = 2 * (2 * (p % cols)) + 1        # the border cell's first triangle, above
+    sunk = end.copy()
+    _carry(lv, start, end, qd, support, notes)
+    z = end.reshape(3, -1)[2, edge]
+    if carried:
+        assert np.allclose(z, margin + (1.0 + SLACK) * THICKNESS, rtol=0.0, atol=1e-12)
+        assert np.all(notes[edge] >= 0)
+    else:
+        assert np.array_equal(z, sunk.reshape(3, -1)[2, edge])
+        assert np.all(notes[edge] == -1)
+
+
 def test_a_folded_cloth_at_rest_costs_no_pairs_once_carried():
     """
     A cloth lying folded on the ground, stepped (``hierarchical``): its top layer lies still.

@@ -120,6 +120,9 @@ ON_EDGE = 0.3
 WALKS = 3
 INSIDE = 0.05
 REACH = 2.0
+# A projection past the grid's border this far (barycentric) out of the triangle there
+# still lies on it (see _track): half a cell, about a thickness at the scenes' spacings.
+BEYOND = 0.5
 # Pairs a step may hold per point (beyond it the rest of the step's pairs are dropped and
 # the count says so).
 PAIRS_PER_POINT = 8
@@ -764,8 +767,8 @@ def _side_cubic(x0, x1, p, i, j, k):
 
 
 @numba.njit(**JIT)
-def _near_blocks(subs, shift, thickness, ai, aj, bi, bj, fresh_blocks, b_boxes, near,
-                 counts):
+def _near_blocks(subs, ends, shift, thickness, ai, aj, bi, bj, fresh_blocks, b_boxes, near,
+                 counts, work, kept):
     """
     List, for each block of patch A, the blocks of patch B its points may come near.
 
@@ -776,33 +779,53 @@ def _near_blocks(subs, shift, thickness, ai, aj, bi, bj, fresh_blocks, b_boxes, 
     so a point tests only its block's list instead of every B block (760,000 box tests a
     detection on the fold demo's resting layers, 2 % of them met). ``b_boxes`` holds B's
     boxes. An A block with no vertex marked in ``fresh_blocks`` lists only the B blocks
-    with one (its points need no test against the others).
+    with one (its points need no test against the others). ``work`` (at least (2, 6))
+    and ``kept`` (``per * per``) are scratch space.
+
+    Only the blocks that meet the other patch's box (``ends``, :func:`_patch_boxes`) are
+    tested against each other: a block's box lies in its patch's, so the others meet no
+    block of it, and the lists are the same. Two patches of layers lying on each other
+    overlap in part, and testing every block of one against every block of the other
+    was 1.9 of the 4.1 ms of a detection of the folded drop at rest (129 x 129, 882
+    pairs of patches, 450,000 box tests).
     """
     per = PATCH // SUB
     width = subs.shape[1]
     s0, s1 = bi * per, min((bi + 1) * per, subs.shape[0])
     t0, t1 = bj * per, min((bj + 1) * per, subs.shape[1])
     _patch_block_boxes(subs, bi, bj, shift, b_boxes)
-    box = np.empty(6)
+    box, patch = work[0], work[1]
+    # B's blocks that A's patch, grown by the thickness, meets (row-major)
+    _moving_box(ends[ai, aj], shift, thickness, patch)
+    count = m = 0
+    for si in range(s0, s1):
+        for sj in range(t0, t1):
+            if _overlap(patch, b_boxes[m]):
+                kept[count] = m
+                count += 1
+            m += 1
+    _moving_box(ends[bi, bj], shift, 0.0, patch)
+    b_width = t1 - t0
     for ui in range(ai * per, min((ai + 1) * per, subs.shape[0])):
         for uj in range(aj * per, min((aj + 1) * per, subs.shape[1])):
             a = (ui - ai * per) * per + uj - aj * per
-            _moving_box(subs[ui, uj], shift, thickness, box)
             counts[a] = 0
-            m = 0
-            for si in range(s0, s1):
-                for sj in range(t0, t1):
-                    if (fresh_blocks[ui, uj] or fresh_blocks[si, sj]) and \
-                            _overlap(box, b_boxes[m]):
-                        near[a, counts[a]] = si * width + sj
-                        counts[a] += 1
-                    m += 1
+            _moving_box(subs[ui, uj], shift, thickness, box)
+            if not _overlap(box, patch):
+                continue
+            for e in range(count):
+                m = kept[e]
+                si, sj = s0 + m // b_width, t0 + m % b_width
+                if (fresh_blocks[ui, uj] or fresh_blocks[si, sj]) and \
+                        _overlap(box, b_boxes[m]):
+                    near[a, counts[a]] = si * width + sj
+                    counts[a] += 1
 
 
 @numba.njit(**JIT)
-def _points_against(x0, x1, rows, cols, thickness, substeps, subs, shift, ai, aj, bi, bj,
-                    fresh, fresh_blocks, pairs, sides, count, b_boxes, near, counts,
-                    tri_boxes, tri_ready):
+def _points_against(x0, x1, rows, cols, thickness, substeps, subs, ends, shift, ai, aj, bi,
+                    bj, fresh, fresh_blocks, pairs, sides, count, b_boxes, near, counts,
+                    tri_boxes, tri_ready, work, kept):
     """
     Test patch A's points against patch B's triangles; returns the new pair count.
 
@@ -810,11 +833,13 @@ def _points_against(x0, x1, rows, cols, thickness, substeps, subs, shift, ai, aj
     point tests the B blocks of its own block's list (:func:`_near_blocks`, which fills
     ``b_boxes``, ``near`` and ``counts``), in the order of the blocks. Only pairs with a
     point marked in ``fresh`` are tested (``fresh_blocks``: the blocks with a vertex
-    marked): the others have not moved since a detection found them apart.
+    marked): the others have not moved since a detection found them apart. ``work`` (3, 6)
+    and ``kept`` are scratch space.
     """
-    path = np.empty(6)
+    path = work[2]
     tri_ready[:] = False
-    _near_blocks(subs, shift, thickness, ai, aj, bi, bj, fresh_blocks, b_boxes, near, counts)
+    _near_blocks(subs, ends, shift, thickness, ai, aj, bi, bj, fresh_blocks, b_boxes, near,
+                 counts, work, kept)
     r0, r1 = ai * PATCH, min((ai + 1) * PATCH, rows - 1)
     c0, c1 = aj * PATCH, min((aj + 1) * PATCH, cols - 1)
     # the points a patch owns: its cells' top-left corners, and the grid's last row and
@@ -1254,6 +1279,7 @@ def _detect(x0, x1, rows, cols, thickness, substeps, dirty, fresh, fresh_blocks,
     counts = np.empty(per * per, dtype=np.int64)
     tri_boxes = np.empty((per * per, 2 * SUB * SUB, 6))
     tri_ready = np.empty(per * per, dtype=np.bool_)
+    work, kept = np.empty((3, 6)), np.empty(per * per, dtype=np.int64)     # scratch
     normals = np.empty((PATCH + 1, PATCH + 1, 2, 4))     # see _patch_creases
     # sweep and prune along x over the patches' boxes
     lows = np.empty(pr * pc)
@@ -1291,14 +1317,15 @@ def _detect(x0, x1, rows, cols, thickness, substeps, dirty, fresh, fresh_blocks,
                         _patch_creases(x, rows, cols, patch_i, patch_j, crease_cosine,
                                        time + 1, crease, normals)
                         crease_ready[patch_i, patch_j, time] = True
-            count = _points_against(x0, x1, rows, cols, thickness, substeps, subs, shift,
-                                    ai, aj, bi, bj, fresh, fresh_blocks, pairs, sides,
-                                    count, b_boxes, near, counts, tri_boxes, tri_ready)
+            count = _points_against(x0, x1, rows, cols, thickness, substeps, subs, ends,
+                                    shift, ai, aj, bi, bj, fresh, fresh_blocks, pairs, sides,
+                                    count, b_boxes, near, counts, tri_boxes, tri_ready,
+                                    work, kept)
             if a != b:
-                count = _points_against(x0, x1, rows, cols, thickness, substeps, subs, shift,
-                                        bi, bj, ai, aj, fresh, fresh_blocks, pairs, sides,
+                count = _points_against(x0, x1, rows, cols, thickness, substeps, subs, ends,
+                                        shift, bi, bj, ai, aj, fresh, fresh_blocks, pairs, sides,
                                         count, b_boxes, near, counts, tri_boxes,
-                                        tri_ready)
+                                        tri_ready, work, kept)
             for patch_i, patch_j, other_i, other_j in ((ai, aj, bi, bj), (bi, bj, ai, aj)):
                 if patch_i == 0 or patch_i == pr - 1 or patch_j == 0 or patch_j == pc - 1:
                     edge_count = _free_edges_against(
@@ -1986,9 +2013,13 @@ def _track(x, p, t, rows, cols):
 
     At most ``WALKS`` triangles on, each across the edge beyond which the projection lies
     farthest (its most negative barycentric weight); within ``INSIDE`` of a triangle is
-    in it. -1 when the walk leaves the grid, comes within ``RING`` rows and columns of p
-    (its own surface, see the module docstring) or does not arrive. All triangles of the
-    grid turn the same way, so p's side of the one it arrives at is its side of t's.
+    in it, and so is a projection past the grid's border within ``BEYOND`` of the triangle
+    on it (a layer's free edge lying on another's, overhanging it a little: a cloth folded
+    in half, its far edge on its near one, where the top edge, let go, sank every step
+    and was pushed out again). -1 when the walk leaves the grid farther out, comes within
+    ``RING`` rows and columns of p (its own surface, see the module docstring) or does not
+    arrive. All triangles of the grid turn the same way, so p's side of the one it
+    arrives at is its side of t's.
     """
     pr, pc = p // cols, p % cols
     none = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
@@ -2004,10 +2035,11 @@ def _track(x, p, t, rows, cols):
             return t, plane
         if walked == WALKS:
             return -1, none
-        t = _next_to(t, 0 if plane[4] == low else (1 if plane[5] == low else 2), rows,
-                     cols)
-        if t < 0:
-            return -1, none
+        nxt = _next_to(t, 0 if plane[4] == low else (1 if plane[5] == low else 2), rows,
+                       cols)
+        if nxt < 0:
+            return (t, plane) if low >= -BEYOND else (-1, none)
+        t = nxt
     return -1, none
 
 
