@@ -1280,6 +1280,7 @@ def _detect(x0, x1, rows, cols, thickness, substeps, dirty, fresh, fresh_blocks,
     tri_boxes = np.empty((per * per, 2 * SUB * SUB, 6))
     tri_ready = np.empty(per * per, dtype=np.bool_)
     work, kept = np.empty((3, 6)), np.empty(per * per, dtype=np.int64)     # scratch
+    creased = np.full((pr, pc), -1, dtype=np.int8)     # per patch: unknown, no, yes
     normals = np.empty((PATCH + 1, PATCH + 1, 2, 4))     # see _patch_creases
     # sweep and prune along x over the patches' boxes
     lows = np.empty(pr * pc)
@@ -1332,13 +1333,29 @@ def _detect(x0, x1, rows, cols, thickness, substeps, dirty, fresh, fresh_blocks,
                         x0, x1, rows, cols, thickness, substeps, subs, shift, patch_i,
                         patch_j, other_i, other_j, fresh, fresh_blocks, dirty, edge_pairs,
                         edge_sides, edge_count, crease)
-                edge_count = _crease_edges_against(
-                    x0, x1, rows, cols, thickness, substeps, subs, shift, patch_i, patch_j,
-                    other_i, other_j, fresh, fresh_blocks, dirty, edge_pairs, edge_sides,
-                    edge_count, crease)
+                # (most patches have no crease: their flags read once a detection)
+                if creased[patch_i, patch_j] < 0:
+                    creased[patch_i, patch_j] = _has_creases(crease, rows, cols, patch_i,
+                                                             patch_j)
+                if creased[patch_i, patch_j]:
+                    edge_count = _crease_edges_against(
+                        x0, x1, rows, cols, thickness, substeps, subs, shift, patch_i,
+                        patch_j, other_i, other_j, fresh, fresh_blocks, dirty, edge_pairs,
+                        edge_sides, edge_count, crease)
                 if a == b:
                     break
     return count, edge_count
+
+
+@numba.njit(**JIT)
+def _has_creases(crease, rows, cols, bi, bj):
+    """Whether patch (bi, bj) has a crease (at either end of the step, :func:`_patch_creases`)."""
+    for r in range(bi * PATCH, min((bi + 1) * PATCH, rows - 1)):
+        for c in range(bj * PATCH, min((bj + 1) * PATCH, cols - 1)):
+            v = 3 * (r * cols + c)
+            if crease[v] or crease[v + 1] or crease[v + 2]:
+                return 1
+    return 0
 
 
 @numba.njit(**JIT)
