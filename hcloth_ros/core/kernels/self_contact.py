@@ -1575,6 +1575,8 @@ def _push(x1, qd, dv, inv_mass, support, verts, weights, ahead, nx, ny, nz, gap,
     lam = -gap / denom
     clipped = 0         # bit m: vertex m reached its obstacle
     for m in range(4):
+        if ims[m] == 0.0:
+            continue    # (it does not move: a point on a resting layer moves alone)
         v = verts[m]
         move = lam * ims[m] * weights[m]
         allowed = _room(support, v, move, nx, ny, nz)
@@ -1649,8 +1651,9 @@ def _inelastic(qd, verts, weights, ims, clipped, ahead, nx, ny, nz, dv):
     mu = -vn / denom
     for d, n_d in ((0, nx), (1, ny), (2, nz)):
         for m in range(4):
-            qd[d, verts[m]] += mu * shares[m] * weights[m] * n_d
-            dv[d, verts[m]] += mu * shares[m] * weights[m] * n_d
+            if shares[m] != 0.0:
+                qd[d, verts[m]] += mu * shares[m] * weights[m] * n_d
+                dv[d, verts[m]] += mu * shares[m] * weights[m] * n_d
     # a side that stays (resting, held, or not moved in the last round): no vertex of the
     # other leaves it faster than it moves along n. The shares follow the weights, and a
     # triangle's vertex of large weight overshot (the layers of a stack rose off each
@@ -1734,7 +1737,8 @@ def _rub(x1, qd, dv, support, verts, uvw, ims, lam, denom, motion, n, most, h):
     # nor does friction drag a vertex into its obstacle
     for idx, wt in ((p, -stop * ip), (i, stop * ii * u), (j, stop * ij * v),
                     (k, stop * ik * w)):
-        _move(x1, qd, dv, idx, _room(support, idx, wt, rx, ry, rz), rx, ry, rz, h)
+        if wt != 0.0:
+            _move(x1, qd, dv, idx, _room(support, idx, wt, rx, ry, rz), rx, ry, rz, h)
 
 
 @numba.njit(**JIT)
