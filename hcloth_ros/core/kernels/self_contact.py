@@ -74,6 +74,10 @@ from step to step across the grid's triangles, and pushed back up off it to ``1 
 thicknesses at the end of each step, friction included, as the detection would push
 that pair, but without detecting it: a layer at rest on another sank into it every step
 under gravity, every point of it a pair, and now lies still.
+
+A level restarted from the coarser one (:func:`settle`, once, before its first step) has
+no motion to tell which side of a triangle a point came from: a pair found near takes the
+side the point's own surface lies on, and is pushed apart as the detection's pairs are.
 """
 
 import math
