@@ -1870,12 +1870,6 @@ def self_contact(
         # gripper sent 2.8 m in one step took 43 s of detection on 65 x 65
         return -1, 0, 0
     substeps = min(MAX_SUBSTEPS, max(MIN_SUBSTEPS, int(math.ceil(longest / (0.5 * edge)))))
-    pairs = np.empty((PAIRS_PER_POINT * n, 2), dtype=np.int64)
-    sides = np.empty(PAIRS_PER_POINT * n)
-    # free edges' pairs, and one a point for the creases'
-    edge_capacity = EDGE_PAIRS_PER_EDGE * 2 * (rows + cols) + n
-    edge_pairs = np.empty((edge_capacity, 2), dtype=np.int64)
-    edge_sides = np.empty(edge_capacity)
     # creases: edges bent enough for an edge as long as the longest at the start to pass
     # under them with both its ends a thickness clear of their two triangles. Each of
     # those triangles must drop by a thickness within half that edge of the crease's
@@ -1885,7 +1879,6 @@ def self_contact(
     # thickness allows)
     crease_sine = min(1.0, 2.0 * thickness / start_edge[0]) if start_edge[0] > 0.0 else 1.0
     crease_cosine = math.cos(2.0 * math.asin(crease_sine))
-    first, dropped = -1, 0
     # the first detection tests only round the points marked moved (the caller's: those
     # that moved since its last call's first detection)
     fresh = moved.copy().reshape(n)
@@ -1902,6 +1895,34 @@ def self_contact(
     touched[:, :] = False
     if subs.shape[:2] != fresh_blocks.shape or crease.shape[0] != 3 * n:
         raise ValueError('self_contact: the block cache does not fit the level')
+    first, dropped = _rounds(x0, x1, qdf, dvf, inv_mass, held_up, rows, cols, thickness,
+                             friction, iterations, h, substeps, crease_cosine, fresh,
+                             fresh_blocks, dirty, stale, touched, boxes, ends, cones, subs,
+                             subs_ready, crease, crease_ready, up, carried, False)
+    return first, substeps, dropped
+
+
+@numba.njit(**JIT)
+def _rounds(x0, x1, qd, dv, inv_mass, support, rows, cols, thickness, friction, iterations,
+            h, substeps, crease_cosine, fresh, fresh_blocks, dirty, stale, touched, boxes,
+            ends, cones, subs, subs_ready, crease, crease_ready, up, carried, surface):
+    """
+    Run rounds of detection and response (:func:`self_contact`); return (first, dropped).
+
+    ``fresh``, ``fresh_blocks``, ``dirty``: what the first detection tests round;
+    ``stale``: the patches whose boxes are out of date; ``touched`` gains the patches the
+    rounds moved points of. ``surface`` (:func:`settle`): ``x0`` is ``x1`` (the creases at
+    the start move with the points) and a near pair takes the side the point's own
+    surface lies on (:func:`_surface_side`).
+    """
+    n = rows * cols
+    pairs = np.empty((PAIRS_PER_POINT * n, 2), dtype=np.int64)
+    sides = np.empty(PAIRS_PER_POINT * n)
+    # free edges' pairs, and one a point for the creases'
+    edge_capacity = EDGE_PAIRS_PER_EDGE * 2 * (rows + cols) + n
+    edge_pairs = np.empty((edge_capacity, 2), dtype=np.int64)
+    edge_sides = np.empty(edge_capacity)
+    first, dropped = -1, 0
     # pairs are pushed a little further than detection looks: one pushed to exactly the
     # thickness would be found again by rounding, and every round would run
     target = thickness * (1.0 + SLACK)
@@ -1910,6 +1931,8 @@ def self_contact(
         _patch_boxes(x0, x1, rows, cols, PATCH, thickness, boxes, ends, cones, stale)
         subs_ready &= ~stale
         crease_ready[:, :, 1] &= ~stale
+        if surface:
+            crease_ready[:, :, 0] &= ~stale
         found, edges_found = _detect(x0, x1, rows, cols, thickness, substeps, dirty, fresh,
                                      fresh_blocks, pairs, sides, edge_pairs, edge_sides,
                                      boxes, ends, cones, subs, subs_ready, crease,
@@ -1923,15 +1946,20 @@ def self_contact(
         # the last round moves points alone: Gauss-Seidel over a cluster of pairs that
         # share vertices converges slowly (a fast fold left 1-3 of 300 pairs crossed
         # after 16 rounds)
+        if surface:
+            for e in range(kept):
+                side = _surface_side(x1, pairs[e, 0], pairs[e, 1], rows, cols)
+                if side != 0.0:
+                    sides[e] = side
         fresh[:] = False
-        _resolve_passes(x0, x1, qdf, dvf, inv_mass, held_up, cols, pairs, sides, kept,
+        _resolve_passes(x0, x1, qd, dv, inv_mass, support, cols, pairs, sides, kept,
                         target, friction, h, attempt == iterations, fresh, edge_pairs,
                         edge_sides, edges_kept, up, carried)
         fresh_blocks = _fresh_blocks(fresh, rows, cols)
         _dirty_patches(fresh_blocks, dirty)
         stale[:, :] = dirty
         touched |= dirty
-    return first, substeps, dropped
+    return first, dropped
 
 
 @numba.njit(**JIT)
@@ -2248,49 +2276,20 @@ def settle(q, mass, hold_kind, support, thickness, iterations, boxes, ends, cone
     x = q.reshape((3, n))
     if not np.all(np.isfinite(x)):
         return 0
-    held_up = support.reshape((4, n))
     inv_mass = _inverse_masses(mass, hold_kind)
     qd, dv = np.zeros((3, n)), np.zeros((3, n))   # pushes move positions alone
     subs_ready[:, :] = False
     crease_ready[:, :, :] = False
     crease_sine = min(1.0, 2.0 * thickness / max(_longest_edge(x, rows, cols), 1e-300))
     crease_cosine = math.cos(2.0 * math.asin(crease_sine))
-    pairs = np.empty((PAIRS_PER_POINT * n, 2), dtype=np.int64)
-    sides = np.empty(PAIRS_PER_POINT * n)
-    edge_capacity = EDGE_PAIRS_PER_EDGE * 2 * (rows + cols) + n
-    edge_pairs = np.empty((edge_capacity, 2), dtype=np.int64)
-    edge_sides = np.empty(edge_capacity)
     fresh = np.ones(n, dtype=np.bool_)
     fresh_blocks = _fresh_blocks(fresh, rows, cols)
     dirty = np.zeros(((rows - 2) // PATCH + 1, (cols - 2) // PATCH + 1), dtype=np.bool_)
     _dirty_patches(fresh_blocks, dirty)
-    stale = dirty.copy()
-    first = -1
-    for attempt in range(iterations + 1):
-        _patch_boxes(x, x, rows, cols, PATCH, thickness, boxes, ends, cones, stale)
-        subs_ready &= ~stale
-        crease_ready[:, :, 0] &= ~stale
-        crease_ready[:, :, 1] &= ~stale
-        found, edges_found = _detect(x, x, rows, cols, thickness, MIN_SUBSTEPS, dirty, fresh,
-                                     fresh_blocks, pairs, sides, edge_pairs, edge_sides,
-                                     boxes, ends, cones, subs, subs_ready, crease, crease_ready,
-                                     crease_cosine)
-        kept = min(found, pairs.shape[0])
-        first = found + edges_found if first < 0 else first
-        if found + edges_found == 0:
-            break
-        for e in range(kept):
-            side = _surface_side(x, pairs[e, 0], pairs[e, 1], rows, cols)
-            if side != 0.0:
-                sides[e] = side
-        fresh[:] = False
-        _resolve_passes(x, x, qd, dv, inv_mass, held_up, cols, pairs, sides, kept,
-                        thickness * (1.0 + SLACK), 0.0, 1.0, attempt == iterations,
-                        fresh, edge_pairs, edge_sides, min(edges_found, edge_pairs.shape[0]),
-                        np.zeros(3), carried)
-        fresh_blocks = _fresh_blocks(fresh, rows, cols)
-        _dirty_patches(fresh_blocks, dirty)
-        stale[:, :] = dirty
+    first = _rounds(x, x, qd, dv, inv_mass, support.reshape((4, n)), rows, cols, thickness,
+                    0.0, iterations, 1.0, MIN_SUBSTEPS, crease_cosine, fresh, fresh_blocks,
+                    dirty, dirty.copy(), touched, boxes, ends, cones, subs, subs_ready,
+                    crease, crease_ready, np.zeros(3), carried, True)[0]
     touched[:, :] = True        # the boxes are the settled positions', not a step's
     return first
 
