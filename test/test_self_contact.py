@@ -14,7 +14,8 @@ from hcloth_ros.core import ClothBuilder, Control, make_scene, make_solver, Stat
 from hcloth_ros.core import kernels
 from hcloth_ros.core.kernels.self_contact import (_edge_side, _fresh_blocks, _may_cross,
                                                   _pair_side, _resolve, _resolve_passes,
-                                                  _triangle, carry, MAX_SUBSTEPS,
+                                                  _triangle, BOXES_KEPT, BOXES_NEW, carry,
+                                                  MAX_SUBSTEPS,
                                                   MIN_SUBSTEPS, obstacle_supports, ON_EDGE,
                                                   patch_cache, REACH, RESOLVE_PASSES, RING,
                                                   SLACK, SUB)
@@ -235,11 +236,11 @@ def _no_support(lv):
 def _run_kernel(lv, start, end, qd, friction):
     """Run the kernel on ``end`` in place; return its velocity changes and its result."""
     dv = np.zeros_like(end)
-    result = kernels.self_contact(end, qd, dv, start, lv.mass,
+    result = kernels.self_contact(end, qd, dv, start, start, lv.mass,
                                   np.zeros(lv.shape, dtype=np.int8),
                                   np.ones(lv.shape, dtype=np.bool_), _no_support(lv),
                                   THICKNESS, friction, 4, H, 10.0, UP,
-                                  *patch_cache(*lv.shape), False)
+                                  *patch_cache(*lv.shape), BOXES_NEW)
     return dv, result
 
 
@@ -247,8 +248,8 @@ def test_kernel_pushes_near_points_apart_as_brute_force_sees():
     lv, start, end, qd, top = _pressed_layers(approach=0.3)
     assert violations(start, end, THICKNESS)[0] > 100
     qd_before, momentum = qd.copy(), np.einsum('drc,rc->d', qd, lv.mass)
-    dv, (pairs, substeps, dropped) = _run_kernel(lv, start, end, qd, 0.0)
-    assert pairs > 100 and substeps == 2 and dropped == 0
+    dv, (pairs, substeps, dropped, clean) = _run_kernel(lv, start, end, qd, 0.0)
+    assert pairs > 100 and substeps == 2 and dropped == 0 and clean
     assert violations(start, end, THICKNESS) == (0, 0)
     # the response is internal: velocity changes are recorded in dv and the momentum
     # stays (to rounding); it is inelastic: the layers no longer approach, and they part
@@ -311,11 +312,11 @@ def test_kernel_leaves_a_sheet_with_nothing_near_bit_for_bit():
     before = end.copy()
     lv = model.level(3)
     qd, dv = np.zeros_like(end), np.zeros_like(end)
-    pairs, _, _ = kernels.self_contact(end, qd, dv, start, lv.mass,
-                                       np.zeros(lv.shape, dtype=np.int8),
-                                       np.ones(lv.shape, dtype=np.bool_), _no_support(lv),
-                                       THICKNESS, 0.3, 4, H, 10.0, UP,
-                                       *patch_cache(*lv.shape), False)
+    pairs, _, _, _ = kernels.self_contact(end, qd, dv, start, start, lv.mass,
+                                          np.zeros(lv.shape, dtype=np.int8),
+                                          np.ones(lv.shape, dtype=np.bool_), _no_support(lv),
+                                          THICKNESS, 0.3, 4, H, 10.0, UP,
+                                          *patch_cache(*lv.shape), BOXES_NEW)
     assert pairs == 0
     assert np.array_equal(end, before) and not qd.any()
 
@@ -346,7 +347,7 @@ def test_an_edge_hooked_round_a_free_edge_is_unhooked():
     end[2, rows - 1, cols // 2] = 0.5 + GAP - 0.033
     assert violations(start, end, THICKNESS)[1] == 0
     assert intersections(start) == 0 and intersections(end) > 0
-    _, (pairs, _, dropped) = _run_kernel(lv, start, end, np.zeros_like(end), 0.0)
+    _, (pairs, _, dropped, _) = _run_kernel(lv, start, end, np.zeros_like(end), 0.0)
     assert pairs > 0 and dropped == 0
     assert intersections(end) == 0
     assert violations(start, end, THICKNESS) == (0, 0)
@@ -539,8 +540,8 @@ def test_a_call_told_which_points_moved_finds_what_a_whole_call_finds():
     dv = np.zeros_like(end)
     hold, support = np.zeros(lv.shape, dtype=np.int8), _no_support(lv)
     every = np.ones(lv.shape, dtype=np.bool_)
-    kernels.self_contact(end, qd, dv, start, lv.mass, hold, every, support, THICKNESS, 0.0,
-                         4, H, 10.0, UP, *cache, False)
+    kernels.self_contact(end, qd, dv, start, start, lv.mass, hold, every, support,
+                         THICKNESS, 0.0, 4, H, 10.0, UP, *cache, BOXES_NEW)
     assert violations(start, end, THICKNESS) == (0, 0)
     moved = np.zeros(lv.shape, dtype=np.bool_)
     upper, _ = _flat_rows(top)
@@ -548,11 +549,11 @@ def test_a_call_told_which_points_moved_finds_what_a_whole_call_finds():
     moved[rows, 5:9] = True
     end[2, moved] -= 0.8 * THICKNESS
     whole = [a.copy() for a in (end, qd, dv)]
-    told = kernels.self_contact(end, qd, dv, start, lv.mass, hold, moved, support,
-                                THICKNESS, 0.0, 4, H, 10.0, UP, *cache, True)
-    every_pair = kernels.self_contact(*whole, start, lv.mass, hold, every, support,
+    told = kernels.self_contact(end, qd, dv, start, start, lv.mass, hold, moved, support,
+                                THICKNESS, 0.0, 4, H, 10.0, UP, *cache, BOXES_KEPT)
+    every_pair = kernels.self_contact(*whole, start, start, lv.mass, hold, every, support,
                                       THICKNESS, 0.0, 4, H, 10.0, UP, *patch_cache(*lv.shape),
-                                      False)
+                                      BOXES_NEW)
     assert told[0] >= moved.sum() and told == every_pair
     for mine, theirs in zip((end, qd, dv), whole):
         assert np.array_equal(mine, theirs)
@@ -621,11 +622,11 @@ def test_a_later_call_takes_the_sub_intervals_of_both_ends_longest_edges(tilt, s
     hold, support = np.zeros(lv.shape, dtype=np.int8), _no_support(lv)
     every = np.ones(lv.shape, dtype=np.bool_)
     first = kernels.self_contact(start.copy(), np.zeros_like(end), np.zeros_like(end), start,
-                                 lv.mass, hold, every, support, THICKNESS, 0.0, 4, H, 10.0,
-                                 UP, *cache, False)
+                                 start, lv.mass, hold, every, support, THICKNESS, 0.0, 4, H,
+                                 10.0, UP, *cache, BOXES_NEW)
     later = kernels.self_contact(end.copy(), np.zeros_like(end), np.zeros_like(end), start,
-                                 lv.mass, hold, every, support, THICKNESS, 0.0, 4, H, 10.0,
-                                 UP, *cache, True)
+                                 start, lv.mass, hold, every, support, THICKNESS, 0.0, 4, H,
+                                 10.0, UP, *cache, BOXES_KEPT)
     assert first[1] == MIN_SUBSTEPS and later[1] == substeps(edge)
 
 
@@ -908,6 +909,55 @@ def test_every_third_step_checks_from_the_last_check():
     assert checked == list(range(3, 46, 3))
 
 
+def test_a_steps_later_calls_start_their_paths_where_a_clean_call_ended():
+    """
+    A step's later calls test the moves made since its last call that left nothing near.
+
+    The kernel's calls of the folded drop, their ``q_from`` and results recorded: the
+    first call of a step starts at the step's start; a later one where the step's last
+    call that ended clean (its last detection found nothing) left the level, or at the
+    step's start if none did. After every step nothing is near, and no point crossed a
+    triangle on any call's path.
+    """
+    model = folded_model()
+    state = folded_state(model, 0.1)
+    solver = make_solver('multigrid', model, thickness=THICKNESS)
+    control = Control(model)
+    solver.step(state, control, H)
+    finest = model.level_count - 1
+    kit, calls = solver.kernels(finest), []
+
+    def recorded(*arguments):
+        q, q_from = arguments[0], arguments[4]
+        before, start = q.copy(), q_from.copy()
+        result = kit.self_contact(*arguments)
+        calls.append((start, before, q.copy(), result))
+        return result
+
+    class Recording:
+
+        def __getattr__(self, name):
+            return recorded if name == 'self_contact' else getattr(kit, name)
+
+    solver._kits[finest] = Recording()
+    from_clean = 0
+    for _ in range(30):
+        calls.clear()
+        step_start = state.q[finest].copy()
+        report = solver.step(state, control, H)
+        assert report.ok, report.reason
+        clean_end = None
+        for start, before, after, (found, _, _, clean) in calls:
+            expected = step_start if clean_end is None else clean_end
+            assert np.array_equal(start, expected)
+            from_clean += clean_end is not None
+            assert violations(start, after, THICKNESS)[1] == 0
+            if clean:
+                clean_end = after
+        assert violations(step_start, state.q[finest], THICKNESS)[0] == 0
+    assert from_clean >= 10, from_clean      # 20 of the 30 steps' later calls
+
+
 def test_fast_fold_does_not_tunnel():
     """
     The top layer moves at 3 m/s into the bottom one, 5 cm a step over a 2 cm gap.
@@ -1171,9 +1221,10 @@ def test_a_stack_of_layers_falling_onto_the_one_on_the_ground_comes_to_rest():
     support = np.zeros((4,) + tuple(lv.shape))
     obstacle_supports(model.scene.planes, model.scene.boxes, margin, end, support)
     dv = np.zeros_like(end)
-    kernels.self_contact(end, qd, dv, start, lv.mass, np.zeros(lv.shape, dtype=np.int8),
+    kernels.self_contact(end, qd, dv, start, start, lv.mass,
+                         np.zeros(lv.shape, dtype=np.int8),
                          np.ones(lv.shape, dtype=np.bool_), support, THICKNESS, 0.3, 8, H,
-                         10.0, UP, *patch_cache(*lv.shape), False)
+                         10.0, UP, *patch_cache(*lv.shape), BOXES_NEW)
     assert violations(start, end, THICKNESS) == (0, 0)
     bottom = layer == 0
     assert np.array_equal(end[:, bottom], start[:, bottom])

@@ -54,9 +54,9 @@ def main(argv=None):
     def timed(*arguments):
         start = time.perf_counter()
         result = kit.self_contact(*arguments)
-        # arguments 6 and -1: the moved-points mask and whether boxes are kept
+        # arguments 7 and -1: the moved-points mask and whether boxes are kept
         calls[-1].append((time.perf_counter() - start, result[0],
-                          int(np.count_nonzero(arguments[6])), arguments[-1]))
+                          int(np.count_nonzero(arguments[7])), arguments[-1]))
         return result
 
     class Timed:

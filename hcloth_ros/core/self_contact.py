@@ -7,7 +7,8 @@ This module decides which level, between which positions, and what the coarser l
 afterwards.
 """
 
-from hcloth_ros.core.kernels.self_contact import carry, obstacle_supports, patch_cache
+from hcloth_ros.core.kernels.self_contact import BOXES_KEPT, BOXES_KEPT_NEW_START, \
+    BOXES_NEW, carry, obstacle_supports, patch_cache
 import numpy as np
 
 # Rounds of self-contact and strain limiting a check runs at most (see SelfContact.apply).
@@ -96,6 +97,9 @@ class SelfContact:
         self._key = None            # (level, time) the next step must start from
         self._steps = 0             # steps since the last check
         self._moved = self._before = self._support = None   # buffers of apply
+        self._clean = None          # where this step's last clean call left the level
+        self._clean_key = None      # (level, time) of the step that _clean is of
+        self._reuse = BOXES_NEW     # what the next call may keep of the last one's boxes
         self._patches = None        # what the kernel keeps between a step's calls
 
     def _due(self, k, state):
@@ -131,7 +135,8 @@ class SelfContact:
         ``moved`` (a mask of the level's points), for a second call in the same step: the
         points moved since the last call, which left nothing near; the first detection
         then tests round them only and keeps the other patches' boxes (None: every point,
-        every box).
+        every box). A call after the step's first tests the paths from where the last
+        call that ended clean left the level (:meth:`_ended`), not from the step's start.
 
         Obstacles do not run after it. A point above a plane or a box's top moves towards
         it by at most its distance to the obstacle's margin (:func:`supports`, taken at
@@ -149,29 +154,32 @@ class SelfContact:
                 solver._inject_down(levels)
             return None
         lv, kit = solver.model.level(k), solver.kernels(k)
-        start = state.q[k] if self._start is None else self._start
         span = (self._steps + 1) * h    # the time the kernel's paths cover
         pairs, dropped = None, 0
         mask, before, support = self._buffers(lv.shape)
         if moved is None:
             mask[:] = True
+            self._clean_key = None
         else:
             np.copyto(mask, moved)
             if not mask.any():
                 return 0
+        step_start = state.q[k] if self._start is None else self._start
+        start, reuse = self._path_start(k, state, moved is not None)
         for attempt in range(ROUNDS):
             np.copyto(before, solver._q[k])
             supports(solver.model.scene, solver._q[k], support)
-            found, _, lost = kit.self_contact(
-                solver._q[k], solver._qd[k], solver._dv[k], start, lv.mass, holds.kind, mask,
+            found, _, lost, clean = kit.self_contact(
+                solver._q[k], solver._qd[k], solver._dv[k], step_start, start, lv.mass,
+                holds.kind, mask,
                 support, self.thickness, self.friction, self.iterations, span,
-                max(solver.model.width, solver.model.height), up, *self._patches,
-                attempt > 0 or moved is not None)
+                max(solver.model.width, solver.model.height), up, *self._patches, reuse)
             if found < 0:
                 solver._extra['self_contact_refused'] = True
                 return None
             pairs = found if pairs is None else pairs
             dropped = max(dropped, lost)
+            start, reuse = self._ended(k, state, solver._q[k], clean, start)
             if not found or solver.strain_limit is None or attempt == ROUNDS - 1:
                 break
             kit.strain_limit(solver._q[k], solver._qd[k], solver._dv[k], lv.rest, holds.kind,
@@ -189,6 +197,39 @@ class SelfContact:
         if pairs or carried:
             solver._inject_down(levels)
         return pairs
+
+    def _path_start(self, k, state, again):
+        """
+        Return where this call's paths start and whether the last call's boxes still fit.
+
+        The step's first call: at the start of the step (or of the last check). A later
+        call (``again``): where the last call of this step that left nothing near ended,
+        if one did (:meth:`_ended`), else where that call started too.
+        """
+        if again and self._clean_key == (k, state.time):
+            return self._clean, self._reuse
+        return (state.q[k] if self._start is None else self._start), \
+            (BOXES_KEPT if again else BOXES_NEW)
+
+    def _ended(self, k, state, q, clean, start):
+        """
+        Note where a call left the level; return where the next call's paths start.
+
+        A call whose last detection found nothing left no point within the thickness of a
+        triangle and none crossed on its way there: the step's next calls (after strain
+        limiting, after the obstacles' rounds) test the paths from there, the short moves
+        those made, instead of the step's whole sweep again from its start (on the folded
+        drop's sliding layers each later call tested ~1,000 moved points over their
+        16 mm sweep, as dear as half the first detection). A call that did not end clean
+        (its rounds ran out) leaves the start where it was, and its boxes fit the next.
+        """
+        if clean:
+            np.copyto(self._clean, q)
+            self._clean_key = (k, state.time)
+            self._reuse = BOXES_KEPT_NEW_START
+            return self._clean, self._reuse
+        self._reuse = BOXES_KEPT
+        return start, self._reuse
 
     def _carry(self, solver, k, state, holds, h, up):
         """
@@ -240,6 +281,8 @@ class SelfContact:
             self._moved = np.ones(shape, dtype=np.bool_)
             self._before = np.empty((3,) + tuple(shape))
             self._support = np.empty((4,) + tuple(shape))
+            self._clean = np.empty((3,) + tuple(shape))
+            self._clean_key = None
             self._patches = patch_cache(*shape)
         return self._moved, self._before, self._support
 

@@ -116,7 +116,7 @@ class _Recorder:
     RESULTS = {'strain_limit': 0, 'contact': 0, 'body_contact': 0,
                'strain_stats': (0.0, 0.0, True),
                'conjugate_gradient': (1, 0.0), 'multigrid_cg': (1, 0.0), 'energy': (0.0, 0.0, 0.0),
-               'self_contact': (0, 0, 0)}
+               'self_contact': (0, 0, 0, False)}
 
     def __init__(self, kit, calls):
         self._kit, self._calls = kit, calls

@@ -82,11 +82,22 @@ side the point's own surface lies on, and is pushed apart as the detection's pai
 
 import math
 
-from hcloth_ros.core.kernels.jit import JIT
+from hcloth_ros.core.kernels.jit import INLINE, JIT
 from hcloth_ros.core.kernels.layout import FREE
 import numba
 import numpy as np
 
+
+# What self_contact's ``reuse`` says of the patch cache: nothing (every patch's boxes are
+# computed: a step's first call); the boxes of this step's last call, from the same start
+# (``q_from``), stale only round the points moved since; the same but the paths now
+# start where the last call left the level clean. Those boxes still hold every path: a
+# patch none of whose points moved since its boxes were swept has its points where they
+# ended, at the new start and at the end alike. So do its creases' flags at the step's
+# start and at the end (an edge creased at either is tested: more tests, none missed); the
+# stale patches take their start's flags anew. The longest edge stays the step's start's
+# (strain limiting keeps edges near it)
+BOXES_NEW, BOXES_KEPT, BOXES_KEPT_NEW_START = 0, 1, 2
 
 # Fewest and most sub-intervals of a step the crossing tests use (two: the distance to a
 # turning triangle's plane is far from linear over a whole step).
@@ -1470,7 +1481,7 @@ def _move(x, qd, dv, i, weight, nx, ny, nz, h):
     dv[2, i] += weight * nz / h
 
 
-@numba.njit(**JIT)
+@numba.njit(**INLINE)
 def _separation(x, p, i, j, k, side, thickness):
     """
     Return how to push p away from triangle (i, j, k): ``(n xyz, gap, u, v, w)``.
@@ -1541,7 +1552,7 @@ def _free_mass(inv_mass, support, v, n, ahead):
     return 0.0 if _blocked(support, v, sign * n[0], sign * n[1], sign * n[2]) else inv_mass[v]
 
 
-@numba.njit(**JIT)
+@numba.njit(**INLINE)
 def _push(x1, qd, dv, inv_mass, support, verts, weights, ahead, nx, ny, nz, gap, one_side):
     """
     Move a pair's four vertices so that their weighted sum gains ``-gap`` along n.
@@ -1593,7 +1604,7 @@ def _push(x1, qd, dv, inv_mass, support, verts, weights, ahead, nx, ny, nz, gap,
     return lam, denom, ims[0], ims[1], ims[2], ims[3]
 
 
-@numba.njit(**JIT)
+@numba.njit(**INLINE)
 def _come_to_rest(inv_mass, support, verts, weights, ims, ahead, nx, ny, nz):
     """
     After a push: a side pushed up off a side that rests comes to rest on it.
@@ -1624,7 +1635,7 @@ def _come_to_rest(inv_mass, support, verts, weights, ims, ahead, nx, ny, nz):
             support[3, v] = 0.0
 
 
-@numba.njit(**JIT)
+@numba.njit(**INLINE)
 def _inelastic(qd, verts, weights, ims, clipped, ahead, nx, ny, nz, dv):
     """
     Take a pushed pair's approach along n off its vertices' velocities.
@@ -1687,7 +1698,7 @@ def _inelastic(qd, verts, weights, ims, clipped, ahead, nx, ny, nz, dv):
                 dv[d, verts[m]] -= excess * n_d
 
 
-@numba.njit(**JIT)
+@numba.njit(**INLINE)
 def _resolve(x0, x1, qd, dv, inv_mass, support, cols, p, t, side, thickness, friction, h,
              one_side):
     """
@@ -1715,7 +1726,7 @@ def _resolve(x0, x1, qd, dv, inv_mass, support, cols, p, t, side, thickness, fri
     return True
 
 
-@numba.njit(**JIT)
+@numba.njit(**INLINE)
 def _rub(x1, qd, dv, support, verts, uvw, ims, lam, denom, motion, n, most, h):
     """
     Friction after a point-triangle push: up to ``most`` (m) off the pair's sliding.
@@ -1813,11 +1824,14 @@ def _resolve_edges(x0, x1, qd, dv, inv_mass, support, cols, e, f, side, thicknes
 def self_contact(
         # inputs / outputs: the level after the step and its velocity change, corrected
         q, qd, dv,
-        # inputs: positions at the start of the step, masses, holds, which points moved
-        # since this step's last call (all of them at its first); in / out: the outward
-        # unit normal of the obstacle below each point and its room to the obstacle's
-        # margin (shape (4, rows, cols); normal zero: none), the room used up in place
-        q_prev, mass, hold_kind, moved, support,
+        # inputs: positions at the start of the step (friction takes the sliding since
+        # then), where the points' paths start (the step's start, or where an earlier call
+        # of the step left nothing near: see the returned ``clean``), masses, holds, which
+        # points moved since this step's last call (all of them at its first); in / out:
+        # the outward unit normal of the obstacle below each point and its room to the
+        # obstacle's margin (shape (4, rows, cols); normal zero: none), the room used up
+        # in place
+        q_prev, q_from, mass, hold_kind, moved, support,
         # inputs: cloth thickness (m), friction coefficient, resolution passes, step (s),
         # the longest move against the level's mean motion a step may hold (m), the unit
         # vector against gravity (what a point lies on is below it)
@@ -1825,7 +1839,8 @@ def self_contact(
         # in / out: the patches' boxes, ends and cones and the patches the last call moved
         # points of (:func:`patch_cache`); whether they hold this step's boxes as of the
         # last call, but at the patches of those points and of the points marked moved
-        # (False: every patch is computed); the blocks' boxes of those patches and whether
+        # (``reuse``: ``BOXES_NEW``, ``BOXES_KEPT`` or ``BOXES_KEPT_NEW_START``); the
+        # blocks' boxes of those patches and whether
         # each patch has them; the longest edge at the start positions; the creases' flags
         # (bit 1: at the start positions, bit 2: at the end) and whether each patch has
         # them at the start and at the end; the triangle each point was last pushed off
@@ -1835,28 +1850,30 @@ def self_contact(
     """
     Keep a level's points ``thickness`` away from its triangles (see the module docstring).
 
-    Returns ``(pairs, substeps, dropped)``: the pairs found (point-triangle and edge
-    pairs), the detection's sub-intervals, and pairs beyond the per-step capacity (0
-    normally). ``pairs`` is -1,
-    and nothing is moved, when a point moved more than ``max_move`` against the mean.
+    Returns ``(pairs, substeps, dropped, clean)``: the pairs found (point-triangle and
+    edge pairs), the detection's sub-intervals, pairs beyond the per-step capacity (0
+    normally) and whether the last round's detection found nothing (then ``q`` may be the
+    ``q_from`` of the step's next call: nothing is near it, nothing crossed on the way).
+    ``pairs`` is -1, and nothing is moved, when a point moved more than ``max_move``
+    against the mean.
     """
     rows, cols = hold_kind.shape
     n = rows * cols
     if rows < 2 or cols < 2:
-        return 0, 0, 0
-    x1, x0 = q.reshape((3, n)), q_prev.reshape((3, n))
+        return 0, 0, 0, True
+    x1, x0, xs = q.reshape((3, n)), q_from.reshape((3, n)), q_prev.reshape((3, n))
     qdf, dvf, held_up = qd.reshape((3, n)), dv.reshape((3, n)), support.reshape((4, n))
     inv_mass = _inverse_masses(mass, hold_kind)
     # the mean displacement; sub-intervals so that no point moves more than half the
     # longest edge relative to it in one
     shift = _mean_move(x0, x1)
-    if not reuse:       # the start positions are the same for a step's calls
+    if reuse == BOXES_NEW:
         start_edge[0] = _longest_edge(x0, rows, cols)
         crease_ready[:, :, 0] = False
     longest = _longest_move(x0, x1, 0.0, 1.0, shift)
     # (the mean of the end positions' moves is finite only if all of them are)
     if not (math.isfinite(longest) and math.isfinite(shift[0] + shift[1] + shift[2])):
-        return 0, 0, 0          # a blown-up step: the solver's check refuses it
+        return 0, 0, 0, False   # a blown-up step: the solver's check refuses it
     # the longest edge at the end only where it can matter: no move longer than the
     # longest edge at the start gives the fewest sub-intervals whatever the end's (a pass
     # over the level a call, 0.09 ms at 129 x 129; most calls of a cloth in contact)
@@ -1864,11 +1881,11 @@ def self_contact(
     if not (0.0 < longest <= edge):
         edge = max(edge, _longest_edge(x1, rows, cols))
         if not math.isfinite(edge):
-            return 0, 0, 0
+            return 0, 0, 0, False
     if longest > max_move:
         # a spring stretched across the cloth makes every patch meet every other: a
         # gripper sent 2.8 m in one step took 43 s of detection on 65 x 65
-        return -1, 0, 0
+        return -1, 0, 0, False
     substeps = min(MAX_SUBSTEPS, max(MIN_SUBSTEPS, int(math.ceil(longest / (0.5 * edge)))))
     # creases: edges bent enough for an edge as long as the longest at the start to pass
     # under them with both its ends a thickness clear of their two triangles. Each of
@@ -1891,25 +1908,33 @@ def self_contact(
     # were computed. At this call's first detection: those the caller marks (moved since
     # the last call started) and those the last call moved points of (their boxes may be
     # of a position the point has left again, even for its start)
-    stale = dirty | touched if reuse else np.ones_like(dirty)
+    stale = np.ones_like(dirty) if reuse == BOXES_NEW else dirty | touched
+    if reuse == BOXES_KEPT_NEW_START:
+        crease_ready[:, :, 0] &= ~stale
     touched[:, :] = False
     if subs.shape[:2] != fresh_blocks.shape or crease.shape[0] != 3 * n:
         raise ValueError('self_contact: the block cache does not fit the level')
-    first, dropped = _rounds(x0, x1, qdf, dvf, inv_mass, held_up, rows, cols, thickness,
-                             friction, iterations, h, substeps, crease_cosine, fresh,
-                             fresh_blocks, dirty, stale, touched, boxes, ends, cones, subs,
-                             subs_ready, crease, crease_ready, up, carried, False)
-    return first, substeps, dropped
+    first, dropped, clean = _rounds(x0, xs, x1, qdf, dvf, inv_mass, held_up, rows, cols,
+                                    thickness, friction, iterations, h, substeps,
+                                    crease_cosine, fresh, fresh_blocks, dirty, stale, touched,
+                                    boxes, ends, cones, subs, subs_ready, crease, crease_ready,
+                                    up, carried, False)
+    return first, substeps, dropped, clean
 
 
 @numba.njit(**JIT)
-def _rounds(x0, x1, qd, dv, inv_mass, support, rows, cols, thickness, friction, iterations,
+def _rounds(x0, xs, x1, qd, dv, inv_mass, support, rows, cols, thickness, friction, iterations,
             h, substeps, crease_cosine, fresh, fresh_blocks, dirty, stale, touched, boxes,
             ends, cones, subs, subs_ready, crease, crease_ready, up, carried, surface):
     """
-    Run rounds of detection and response (:func:`self_contact`); return (first, dropped).
+    Run rounds of detection and response (:func:`self_contact`); return (first, dropped, clean).
 
-    ``fresh``, ``fresh_blocks``, ``dirty``: what the first detection tests round;
+    ``clean``: the last detection found nothing (the rounds did not run out), so no point
+    is within the thickness of a triangle at ``x1`` and none crossed one on the way there.
+
+    The paths detected run from ``x0`` to ``x1``; the pushes' friction takes the sliding
+    since ``xs`` (the step's start). ``fresh``, ``fresh_blocks``, ``dirty``: what the first
+    detection tests round;
     ``stale``: the patches whose boxes are out of date; ``touched`` gains the patches the
     rounds moved points of. ``surface`` (:func:`settle`): ``x0`` is ``x1`` (the creases at
     the start move with the points) and a near pair takes the side the point's own
@@ -1922,7 +1947,7 @@ def _rounds(x0, x1, qd, dv, inv_mass, support, rows, cols, thickness, friction, 
     edge_capacity = EDGE_PAIRS_PER_EDGE * 2 * (rows + cols) + n
     edge_pairs = np.empty((edge_capacity, 2), dtype=np.int64)
     edge_sides = np.empty(edge_capacity)
-    first, dropped = -1, 0
+    first, dropped, clean = -1, 0, False
     # pairs are pushed a little further than detection looks: one pushed to exactly the
     # thickness would be found again by rounding, and every round would run
     target = thickness * (1.0 + SLACK)
@@ -1942,6 +1967,7 @@ def _rounds(x0, x1, qd, dv, inv_mass, support, rows, cols, thickness, friction, 
         first = found + edges_found if first < 0 else first
         dropped = max(dropped, found - kept + edges_found - edges_kept)
         if found + edges_found == 0:
+            clean = True
             break
         # the last round moves points alone: Gauss-Seidel over a cluster of pairs that
         # share vertices converges slowly (a fast fold left 1-3 of 300 pairs crossed
@@ -1952,14 +1978,14 @@ def _rounds(x0, x1, qd, dv, inv_mass, support, rows, cols, thickness, friction, 
                 if side != 0.0:
                     sides[e] = side
         fresh[:] = False
-        _resolve_passes(x0, x1, qd, dv, inv_mass, support, cols, pairs, sides, kept,
+        _resolve_passes(xs, x1, qd, dv, inv_mass, support, cols, pairs, sides, kept,
                         target, friction, h, attempt == iterations, fresh, edge_pairs,
                         edge_sides, edges_kept, up, carried)
         fresh_blocks = _fresh_blocks(fresh, rows, cols)
         _dirty_patches(fresh_blocks, dirty)
         stale[:, :] = dirty
         touched |= dirty
-    return first, dropped
+    return first, dropped, clean
 
 
 @numba.njit(**JIT)
@@ -2171,7 +2197,7 @@ def carry(q, qd, dv, q_prev, mass, hold_kind, support, carried, up, thickness, f
     return count
 
 
-@numba.njit(**JIT)
+@numba.njit(**INLINE)
 def _bear(x0, x1, qd, dv, inv_mass, support, p, t, side, up, thickness, friction, rows,
           cols, h):
     """
@@ -2286,10 +2312,10 @@ def settle(q, mass, hold_kind, support, thickness, iterations, boxes, ends, cone
     fresh_blocks = _fresh_blocks(fresh, rows, cols)
     dirty = np.zeros(((rows - 2) // PATCH + 1, (cols - 2) // PATCH + 1), dtype=np.bool_)
     _dirty_patches(fresh_blocks, dirty)
-    first = _rounds(x, x, qd, dv, inv_mass, support.reshape((4, n)), rows, cols, thickness,
-                    0.0, iterations, 1.0, MIN_SUBSTEPS, crease_cosine, fresh, fresh_blocks,
-                    dirty, dirty.copy(), touched, boxes, ends, cones, subs, subs_ready,
-                    crease, crease_ready, np.zeros(3), carried, True)[0]
+    first = _rounds(x, x, x, qd, dv, inv_mass, support.reshape((4, n)), rows, cols,
+                    thickness, 0.0, iterations, 1.0, MIN_SUBSTEPS, crease_cosine, fresh,
+                    fresh_blocks, dirty, dirty.copy(), touched, boxes, ends, cones, subs,
+                    subs_ready, crease, crease_ready, np.zeros(3), carried, True)[0]
     touched[:, :] = True        # the boxes are the settled positions', not a step's
     return first
 
