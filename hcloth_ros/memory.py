@@ -18,7 +18,9 @@ small scene (interpreter, numba's compiled kernels, rclpy): 215 MB measured.
 # (the measured peaks at 22,325 points, 129 x 129 finest, rounded up by 2-5 %)
 BYTES_PER_POINT = {'multigrid': 1050, 'hierarchical': 380, 'implicit': 520,
                    'explicit': 380, 'approx': 380}
-SELF_CONTACT_BYTES = 220
+# (2026-11-29: 189-279 B more a point with self-contact than without, the most under
+# multigrid, its later calls' clean positions included; 220 before)
+SELF_CONTACT_BYTES = 290
 # multigrid with solver.newton_tolerance_steps: moved keeps its solved level's last solve
 # (positions and velocities, 48 bytes a point of that level; counted on every point)
 MOVED_TOLERANCE_BYTES = 48
