@@ -165,15 +165,15 @@ class SelfContact:
             if not mask.any():
                 return 0
         step_start = state.q[k] if self._start is None else self._start
-        start, reuse = self._path_start(k, state, moved is not None)
+        start, reuse = self._path_start(k, state, step_start, moved is not None)
         for attempt in range(ROUNDS):
             np.copyto(before, solver._q[k])
             supports(solver.model.scene, solver._q[k], support)
             found, _, lost, clean = kit.self_contact(
                 solver._q[k], solver._qd[k], solver._dv[k], step_start, start, lv.mass,
-                holds.kind, mask,
-                support, self.thickness, self.friction, self.iterations, span,
-                max(solver.model.width, solver.model.height), up, *self._patches, reuse)
+                holds.kind, mask, support, self.thickness, self.friction, self.iterations,
+                span, max(solver.model.width, solver.model.height), up, *self._patches,
+                reuse)
             if found < 0:
                 solver._extra['self_contact_refused'] = True
                 return None
@@ -198,18 +198,17 @@ class SelfContact:
             solver._inject_down(levels)
         return pairs
 
-    def _path_start(self, k, state, again):
+    def _path_start(self, k, state, step_start, again):
         """
         Return where this call's paths start and whether the last call's boxes still fit.
 
-        The step's first call: at the start of the step (or of the last check). A later
-        call (``again``): where the last call of this step that left nothing near ended,
-        if one did (:meth:`_ended`), else where that call started too.
+        The step's first call: at ``step_start`` (the step's, or the last check's). A
+        later call (``again``): where the last call of this step that left nothing near
+        ended, if one did (:meth:`_ended`), else at ``step_start`` too.
         """
         if again and self._clean_key == (k, state.time):
             return self._clean, self._reuse
-        return (state.q[k] if self._start is None else self._start), \
-            (BOXES_KEPT if again else BOXES_NEW)
+        return step_start, (BOXES_KEPT if again else BOXES_NEW)
 
     def _ended(self, k, state, q, clean, start):
         """
