@@ -7,7 +7,8 @@ Self-contact's kernel calls step by step on the contact bench's folded drop.
 The folded cloth of ``hcloth_contact_bench`` (``multigrid`` or ``--solver``, thickness
 4 mm, one numba thread) falls onto the ground; each self-contact kernel call of the
 finest level is timed and printed with the pairs its first detection found, how many
-points it was told had moved and whether it kept the patch boxes of the call before,
+points it was told had moved and whether it kept the patch boxes of the call before
+(and tested the paths from where the step's last clean call ended),
 and the step's ``carry`` (the layers lying on each other kept on them before the
 detection, every step) with the points it moved. Last, the median of a
 step's kernel time (a step makes one call or more: the step's own, the ones after its
@@ -28,6 +29,10 @@ import time
 
 import numba
 import numpy as np
+
+
+# the kernel's reuse argument (BOXES_NEW, BOXES_KEPT, BOXES_KEPT_NEW_START)
+BOXES = ('new', 'kept', 'kept, paths from the last clean call')
 
 
 def main(argv=None):
@@ -80,7 +85,7 @@ def main(argv=None):
         solver.step(state, control, 1 / 60)
         if step % args.every == 0:
             print(f'step {step + 1}: ' + ' | '.join(
-                f'{1e3 * t:.2f} ms, {pairs} pairs, {moved} moved, boxes kept {kept}'
+                f'{1e3 * t:.2f} ms, {pairs} pairs, {moved} moved, boxes {BOXES[kept]}'
                 for t, pairs, moved, kept in calls[-1])
                 + f'; carry {1e3 * carries[-1][0]:.2f} ms, {carries[-1][1]} points moved',
                 flush=True)
