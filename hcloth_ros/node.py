@@ -42,7 +42,8 @@ each follows ``cloth/obstacles/<name>/pose`` (``geometry_msgs/PoseStamped`` in
 an obstacle moves.
 
 Bad input (non-finite poses, wrong frames, commands before any pose) is logged, throttled,
-and dropped; the simulation goes on. A step refused for blow-up is retried in 2, 4 and 8
+and dropped; the simulation goes on. A step refused for blow-up, or for stretching a
+spring past ``solver.retry_strain`` from a start within it, is retried in 2, 4 and 8
 smaller steps and the node says so. ``cloth/reset`` (``std_srvs/Trigger``) returns the
 cloth to its initial state and releases every grasp. ``pinned_points``, the static
 obstacles (``scene.*``: a cloth inside a new obstacle is pushed out over a few steps) and
@@ -731,8 +732,9 @@ class ClothSimNode(Node):
         if steps:
             ms = self.sim.dt * 1e3
             self.get_logger().warning(
-                f'step of {ms:.2f} ms refused (blow-up); retried as {steps} steps of '
-                f'{ms / steps:.2f} ms: went through', throttle_duration_sec=1.0)
+                f'step of {ms:.2f} ms refused ({report.extra.get("refused", "blow-up")}); '
+                f'retried as {steps} steps of {ms / steps:.2f} ms: went through',
+                throttle_duration_sec=1.0)
         else:
             self.get_logger().error(f'{report.reason}; retried in 2, 4 and 8 smaller steps, '
                                     'all refused', throttle_duration_sec=1.0)

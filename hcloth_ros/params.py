@@ -102,6 +102,10 @@ PARAMS = [
     Param('solver.strain_limit', 0.1, 'largest spring stretch kept by strain limiting '
           '(0.1 = 10 %; multigrid: on the eq. 7 levels only); 0 switches it off', 0.0, 10.0,
           False),
+    Param('solver.retry_strain', 0.5, 'a step that stretches a finest spring beyond this '
+          '(0.5 = 50 %) from a start where none was is taken again as 2, then 4, then 8 '
+          'smaller steps (the last however far they stretch): layers of the cloth meeting '
+          'fast; 0 switches it off', 0.0, 5.0, False),
     Param('solver.dt', 1 / 60, 'simulated seconds per step (s)', 1e-6, 0.1, False),
     Param('solver.substeps', 1, 'solver steps per timer tick', 1, 100, False),
     Param('solver.contact_rounds', 16, 'most rounds of strain limiting '
@@ -364,7 +368,10 @@ def build_solver(model, values):
                        self_friction=float(values['self_contact.friction']),
                        self_contact_iterations=int(values['self_contact.iterations']),
                        self_contact_interval=int(values['self_contact.interval']))
+    # (a recording started before the parameter existed replays without it, as it ran)
+    retry = float(values.get('solver.retry_strain', 0.0))
     return make_solver(name, model, external=values['solver.external'], strain_limit=limit,
+                       retry_strain=retry if retry > 0 else None,
                        contact_rounds=int(values['solver.contact_rounds']),
                        contact_sweeps=int(values['solver.contact_sweeps']) or None,
                        contact_strain=values['solver.contact_strain'],

@@ -29,7 +29,8 @@ import numpy as np
 
 FORMAT = 1      # of the start record and the commands; a change breaks old recordings
 KINDS = ('grasp', 'move', 'release', 'pins', 'levels', 'body', 'scene', 'set', 'reset')
-SETTINGS = ('solver.dt', 'solver.substeps', 'solver.contact_rounds', 'solver.strain_limit')
+SETTINGS = ('solver.dt', 'solver.substeps', 'solver.contact_rounds', 'solver.strain_limit',
+            'solver.retry_strain')
 
 
 def version():
@@ -142,6 +143,8 @@ class Simulation:
             self.solver.contact_rounds = int(value)
         elif name == 'solver.strain_limit':
             self.solver.strain_limit = float(value) if value > 0 else None
+        elif name == 'solver.retry_strain':
+            self.solver.retry_strain = float(value) if value > 0 else None
         else:
             raise ValueError(f'no setting {name!r} (have {SETTINGS})')
 

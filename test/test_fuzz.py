@@ -44,6 +44,7 @@ def scenes(draw):
         'solver.accurate_level': draw(st.integers(0, 3)),
         'solver.integrator': draw(st.sampled_from(['bdf2', 'backward_euler'])),
         'solver.strain_limit': draw(st.sampled_from([0.0, 0.05, 0.1, 1.0])),
+        'solver.retry_strain': draw(st.sampled_from([0.0, 0.3, 0.5])),
         'scene.ground': draw(st.booleans()),
         'scene.ground_z': draw(st.floats(-1.0, 2.0)),
         'scene.friction': draw(st.floats(0.0, 2.0)),

@@ -234,7 +234,8 @@ def test_runtime_solver_parameters_take_effect(graph):
     sim, _, clouds, _, spin_until, _ = graph
     ok = sim.set_parameters([Parameter('solver.dt', value=0.005),
                              Parameter('solver.substeps', value=2),
-                             Parameter('solver.strain_limit', value=0.0)])
+                             Parameter('solver.strain_limit', value=0.0),
+                             Parameter('solver.retry_strain', value=0.0)])
     assert all(r.successful for r in ok)
     t0 = sim.state.time
     clouds.clear()
@@ -242,7 +243,7 @@ def test_runtime_solver_parameters_take_effect(graph):
     ticks = len(clouds)
     # each tick now advances 2 x 5 ms (within the ticks that ran while we counted)
     assert sim.state.time - t0 == pytest.approx(0.01 * ticks, abs=0.02)
-    assert sim.solver.strain_limit is None
+    assert sim.solver.strain_limit is None and sim.solver.retry_strain is None
     refused = sim.set_parameters([Parameter('solver.dt', value=5.0)])
     assert not refused[0].successful and sim.sim.dt == 0.005
     read_only = sim.set_parameters([Parameter('cloth.levels', value=2)])

@@ -2,7 +2,7 @@
 The contact bench's folded drop folded again across its crease: does the cloth tangle.
 
     .venv/bin/python tools/double_fold.py [--size 65] [--thickness 0.004] \
-        [--solver multigrid] [--fold-steps 72] [--option NAME=VALUE ...]
+        [--solver multigrid] [--fold-steps 72] [--retries] [--option NAME=VALUE ...]
 
 The folded cloth of ``hcloth_contact_bench`` (``--size`` finest points a side, one numba
 thread) lands in 45 steps; a grasp then takes its far 6 cm strip (both layers) and turns
@@ -11,6 +11,9 @@ it 180 degrees about a line along y, 1 cm over the cloth's top at the middle, in
 level's edges through its own triangles are counted (``tools/intersections.py``: a
 tangle). Prints the steps with any, the largest finest strain (``strain_stats``) and the
 highest point above the ground at the end; every 12 fold steps a progress line.
+``--retries`` steps as the node does (``core.recovery.step_with_retries``: a refused step
+again in 2, 4 or 8 steps, and the node's ``solver.retry_strain`` unless ``--option`` sets
+it) and prints the steps retried.
 ``test_self_contact.py::test_a_cloth_folded_twice_does_not_tangle_where_its_creases_cross``
 is this scene at 65 x 65 cut short after the release. ``--thickness none`` runs without
 self-contact.
@@ -27,6 +30,8 @@ def main(argv=None):
     parser.add_argument('--thickness', default='0.004', help="m, or 'none'")
     parser.add_argument('--solver', default='multigrid')
     parser.add_argument('--fold-steps', type=int, default=72)
+    parser.add_argument('--retries', action='store_true',
+                        help='step as the node does: refused or overstretched steps retried')
     parser.add_argument('--option', action='append', default=[], metavar='NAME=VALUE',
                         help='a solver option (YAML value), repeatable')
     args = parser.parse_args(argv)
@@ -34,19 +39,28 @@ def main(argv=None):
     from hcloth_ros.bench.self_contact import scene_setup, second_fold
     from hcloth_ros.core import make_solver
     from hcloth_ros.core.kernels import stats
-    from hcloth_ros.params import assignments
+    from hcloth_ros.core.recovery import step_with_retries
+    from hcloth_ros.params import assignments, PARAM_BY_NAME
     from intersections import intersections
     thickness = None if args.thickness == 'none' else float(args.thickness)
     model, state, control = scene_setup(args.size, 'folded')
-    solver = make_solver(args.solver, model, thickness=thickness, **assignments(args.option))
+    options = assignments(args.option)
+    if args.retries:
+        options.setdefault('retry_strain', PARAM_BY_NAME['solver.retry_strain'].default)
+    solver = make_solver(args.solver, model, thickness=thickness, **options)
     finest = model.level_count - 1
-    tangled, largest, step = {}, 0.0, 0
+    tangled, largest, step, retried = {}, 0.0, 0, {}
 
     def advance(count):
         nonlocal largest, step
         for _ in range(count):
             step += 1
-            report = solver.step(state, control, 1 / 60)
+            if args.retries:
+                report, taken = step_with_retries(solver, state, control, 1 / 60)
+                if taken != 1:
+                    retried[step] = taken
+            else:
+                report = solver.step(state, control, 1 / 60)
             if not report.ok:
                 print(f'step {step} refused: {report.reason}', flush=True)
                 continue
@@ -69,7 +83,9 @@ def main(argv=None):
     ground = model.scene.planes[0, 3]
     print(f'{args.solver} {args.size} x {args.size}, thickness {thickness}: edges through '
           f'triangles after steps {tangled or "none"}; largest strain {largest:.3f}; highest '
-          f'point {state.q[finest][2].max() - ground:.3f} m above the ground')
+          f'point {state.q[finest][2].max() - ground:.3f} m above the ground'
+          + (f'; steps retried (as n smaller ones) {retried or "none"}' if args.retries
+             else ''))
 
 
 if __name__ == '__main__':

@@ -10,13 +10,14 @@ The folded cloth of ``hcloth_contact_bench`` (129 x 129 by default, ``multigrid`
 seed a run), falls and opens on the ground. Per seed: the largest finest strain of an
 accepted step, how many accepted steps were over 0.2 (twice the strain limit) and which
 steps were refused (after the fourth refusal the run stops). ``--retries`` steps as the node
-does (``core.recovery.step_with_retries``: a refused step again in 2, 4 or 8 steps) and
-counts those retried. ``--intersections`` counts after every accepted step the finest
-level's edges through its own triangles (``tools/intersections.py``: a tangle, which
-self-contact's pairs may not see) and prints the steps with any. Seed 2 tangled with the
-release before the free edges were tested against edges (8.81 before a refusal, edges
-through triangles after steps 7-11 and 84-89); now its largest strain is 0.24 with no edge
-through a triangle (doc/self_contact_log.md).
+does (``core.recovery.step_with_retries``: a refused step again in 2, 4 or 8 steps, and
+the node's ``solver.retry_strain`` unless ``--option`` sets it) and counts those retried.
+``--intersections`` counts after every accepted step the finest level's edges through its
+own triangles (``tools/intersections.py``: a tangle, which self-contact's pairs may not
+see) and prints the steps with any. Seed 2 tangled with the release before the free edges
+were tested against edges (8.81 before a refusal, edges through triangles after steps 7-11
+and 84-89); now its largest strain is 0.24 with no edge through a triangle
+(doc/self_contact_log.md).
 """
 
 import argparse
@@ -41,9 +42,11 @@ def main(argv=None):
     from hcloth_ros.bench.self_contact import scene_setup
     from hcloth_ros.core import make_solver
     from hcloth_ros.core.recovery import step_with_retries
-    from hcloth_ros.params import assignments
+    from hcloth_ros.params import assignments, PARAM_BY_NAME
     from intersections import intersections
     options = dict({'thickness': 0.004}, **assignments(args.option))
+    if args.retries:
+        options.setdefault('retry_strain', PARAM_BY_NAME['solver.retry_strain'].default)
     for seed in (int(s) for s in args.seeds.split(',')):
         model, state, control = scene_setup(args.size, 'folded')
         rng = np.random.default_rng(seed)

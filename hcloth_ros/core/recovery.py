@@ -2,13 +2,31 @@
 Recovery from a refused step: the same time span again in smaller steps.
 
 A step is refused when it would write a non-finite state or stretch a spring beyond
-``blowup_strain`` (:class:`~hcloth_ros.core.solvers.Solver`); the state keeps its last good
-value. Stiffness the step is too long for can do that at the node's step and not at half or
-a quarter of it. A grasp or a body that jumps is not helped: held points and bodies reach
-their poses in the first of the smaller steps (nothing is interpolated).
+``blowup_strain`` (:class:`~hcloth_ros.core.solvers.Solver`), or, with the solver's
+``retry_strain`` set, when it stretches one beyond that from a start where none was
+(``stretched``); the state keeps its last good value. Stiffness the step is too long for
+can do that at the node's step and not at half or a quarter of it, and so can layers of
+the cloth meeting fast: self-contact pushes them apart a pair at a time, and the shorter
+the step the less each push stretches the springs round it. A grasp or a body that jumps
+is not helped: held points and bodies reach their poses in the first of the smaller steps
+(nothing is interpolated).
 """
 
+from contextlib import contextmanager
+
 SPLITS = (2, 4, 8)
+
+
+@contextmanager
+def _stretch_allowed(solver, allowed):
+    """Within it, ``solver`` refuses no step as ``stretched`` (if ``allowed``)."""
+    kept = solver.retry_strain
+    if allowed:
+        solver.retry_strain = None
+    try:
+        yield
+    finally:
+        solver.retry_strain = kept
 
 
 def step_with_retries(solver, state, control, dt, splits=SPLITS):
@@ -17,8 +35,11 @@ def step_with_retries(solver, state, control, dt, splits=SPLITS):
 
     n takes the values of ``splits`` in turn. Returns ``(report, n)``: the last report and
     the steps it took (1: the first try went through; 0: every try was refused, and state
-    and moving bodies are where they were). Held points reach their targets and moving
-    bodies their poses in the first of the n steps, then stay.
+    and moving bodies are where they were). A report after retries holds the first
+    refusal's reason in ``extra['refused']``. Held points reach their targets and moving
+    bodies their poses in the first of the n steps, then stay. The last n takes its steps
+    however far they stretch the springs (below ``blowup_strain``): a strain that smaller
+    steps do not bring under ``retry_strain`` is kept rather than the cloth stopped.
     """
     report = solver.step(state, control, dt)
     if report.ok:
@@ -26,12 +47,14 @@ def step_with_retries(solver, state, control, dt, splits=SPLITS):
     refused = report
     for n in splits:
         start, starts = state.copy(), control.bodies.starts()
-        for _ in range(n):
-            report = solver.step(state, control, dt / n)
-            if not report.ok:
-                state.assign(start)
-                control.bodies.restore(starts)
-                break
-        else:
-            return report, n
+        with _stretch_allowed(solver, n == splits[-1]):
+            for _ in range(n):
+                report = solver.step(state, control, dt / n)
+                if not report.ok:
+                    state.assign(start)
+                    control.bodies.restore(starts)
+                    break
+            else:
+                report.extra['refused'] = refused.reason
+                return report, n
     return refused, 0

@@ -185,11 +185,12 @@ class SelfContact:
             kit.strain_limit(solver._q[k], solver._qd[k], solver._dv[k], lv.rest, holds.kind,
                              False, solver.strain_limit, solver.strain_refine_iterations,
                              solver.strain_tolerance, h, solver._scratch[k])
-            # the next call tests round the points this call or strain limiting moved
-            # (elsewhere nothing changed since this call's first detection) and
-            # recomputes the patch boxes there and where this call moved points; none
-            # moved: done
-            np.any(solver._q[k] != before, axis=0, out=mask)
+            # the next call tests round the points moved since its paths' start: since
+            # this call ended, if it ended clean (strain limiting's moves alone: a point
+            # only this call pushed has an empty path from there), else since this
+            # call's first detection. The kernel recomputes the patch boxes there and
+            # where this call moved points. None moved: done
+            np.any(solver._q[k] != (self._clean if clean else before), axis=0, out=mask)
             if not mask.any():
                 break
         if dropped:

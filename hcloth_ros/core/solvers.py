@@ -73,6 +73,9 @@ class StepReport:
     cg_iterations: int = 0
     converged: bool = True
     extra: dict = field(default_factory=dict)
+    # refused only because it stretched a spring past ``retry_strain`` (Solver): smaller
+    # steps may not (core.recovery)
+    stretched: bool = False
 
 
 class Solver:
@@ -92,6 +95,13 @@ class Solver:
         (relative to the limit).
     :param blowup_strain: a step that leaves a spring stretched beyond this (relative) or
         any value non-finite is refused.
+    :param retry_strain: a step that stretches a spring of the finest simulated level
+        beyond this (relative) from a start where none was is refused too, marked
+        ``stretched``, so that :func:`~hcloth_ros.core.recovery.step_with_retries` takes it
+        again in smaller steps (a cloth falling onto itself at 3 m/s, pushed apart a pair
+        at a time, leaves springs at 1.2 after a 1/60 s step and 0.3-0.4 after four
+        quarter steps: the README); None: off. A start already stretched beyond it (two
+        grippers pulling the cloth taut) is not retried: smaller steps would not undo it.
     :param builds: ``'serial'`` or ``'parallel'`` kernel builds on every level (or a kernel
         set with their names), or None: the parallel builds on levels large enough to
         split when numba runs several threads (see :mod:`hcloth_ros.core.kernels`).
@@ -126,10 +136,10 @@ class Solver:
 
     def __init__(self, model, external='exact', strain_limit=0.1, strain_iterations=100,
                  strain_refine_iterations=4, strain_tolerance=0.005, blowup_strain=10.0,
-                 builds=None, thickness=None, self_friction=0.3, self_contact_iterations=8,
-                 self_contact_interval=1, contact_rounds=16, contact_sweeps=None,
-                 contact_strain='tangent', contact_relaxation=TANGENT_RELAXATION,
-                 contact_tethers=True):
+                 retry_strain=None, builds=None, thickness=None, self_friction=0.3,
+                 self_contact_iterations=8, self_contact_interval=1, contact_rounds=16,
+                 contact_sweeps=None, contact_strain='tangent',
+                 contact_relaxation=TANGENT_RELAXATION, contact_tethers=True):
         if external not in EXTERNAL_MODES:
             raise ValueError(f'external must be one of {EXTERNAL_MODES}, got {external!r}')
         if strain_limit is not None and not (0.0 < strain_limit < 10.0):
@@ -152,6 +162,9 @@ class Solver:
             raise ValueError(f'strain_tolerance must be in (0, 1), got {strain_tolerance}')
         if not (blowup_strain > 0):
             raise ValueError(f'blowup_strain must be positive, got {blowup_strain}')
+        if retry_strain is not None and not (0.0 < retry_strain < blowup_strain):
+            raise ValueError(f'retry_strain must be in (0, blowup_strain {blowup_strain:g}) '
+                             f'or None, got {retry_strain}')
         self.self_contact = None if thickness is None else SelfContact(
             thickness, self_friction, self_contact_iterations, self_contact_interval)
         if isinstance(builds, str) and builds not in ('serial', 'parallel'):
@@ -173,6 +186,7 @@ class Solver:
         self.contact_sweeps = int(contact_sweeps)
         self.contact_strain = contact_strain
         self.blowup_strain = float(blowup_strain)
+        self.retry_strain = None if retry_strain is None else float(retry_strain)
         shapes = [(3, lv.rows, lv.cols) for lv in model.levels]
         self._q = [buffers.zeros(s) for s in shapes]
         self._qd = [buffers.zeros(s) for s in shapes]
@@ -428,7 +442,7 @@ class Solver:
                                 'far?): step refused, last good state kept',
                                 levels=tuple(levels))
         else:
-            report = self._check(levels)
+            report = self._check(levels, state)
         if report.ok:
             # the new state goes in by swapping arrays (no copy): State.q[k] and
             # State.qd[k] are other array objects after every step (see State)
@@ -443,9 +457,12 @@ class Solver:
         report.extra.update(self._extra)
         return report
 
-    def _check(self, levels):
+    def _check(self, levels, state):
         """
         Refuse a non-finite step or a runaway strain, judged on the finest level alone.
+
+        A strain past ``retry_strain`` from a start (``state``, not yet replaced) within it
+        is refused as ``stretched`` (the start's strain is computed only then).
 
         After a step every coarser simulated level is the finest one's points at every
         other row and column (constraint C, the multigrid solver's injection, and the
@@ -465,6 +482,14 @@ class Solver:
             return StepReport(False, f'runaway strain {mx:.3g} > {self.blowup_strain:g} '
                               f'on level {k}: step refused, last good state kept',
                               max_strain=mx, levels=tuple(levels))
+        if self.retry_strain is not None and mx > self.retry_strain:
+            start = self.kernels(k).strain_stats(state.q[k], state.qd[k],
+                                                 self.model.level(k).rest)[0]
+            if start <= self.retry_strain:
+                return StepReport(False, f'strain {mx:.3g} > retry_strain '
+                                  f'{self.retry_strain:g} on level {k} (from {start:.3g}): '
+                                  'step refused, last good state kept', max_strain=mx,
+                                  levels=tuple(levels), stretched=True)
         return StepReport(True, max_strain=mx, mean_strain=mean, levels=tuple(levels))
 
 
