@@ -326,3 +326,43 @@ def test_tick_stats_keep_their_memory_and_the_last_window():
     assert np.array_equal(stats.series('tick'), (np.arange(150, 250) + 1) * 1e-4)
     assert np.array_equal(stats.series('tick', 3), np.array([248, 249, 250]) * 1e-4)
     assert stats.recent(3)['tick']['p50'] == pytest.approx(24.9)     # ms
+
+
+def test_a_tick_retries_an_overstretched_step_and_names_why():
+    """
+    ``solver.retry_strain`` as the node runs it: a retry is heard, with the first reason.
+
+    The 65 x 65 cloth folded in two, its top layer thrown at 5 m/s onto the bottom one
+    (``test_self_contact.py``'s scene, built from parameters): at 0.5 the step is retried
+    as two (0.55 in one step); ``set`` to 0, or without self-contact, nothing is retried,
+    though the default cloth's first step from rest stretches past 1e-4 (a gripper's
+    pose far away stretches as much in smaller steps).
+    """
+    from hcloth_ros.bench.self_contact import folded
+    heard = []
+
+    def hear(report, steps):
+        heard.append((report, steps))
+
+    def thrown(retry, thickness=0.005):
+        sim = Simulation.build(params.resolve({
+            'cloth.resolution': [9, 9], 'cloth.levels': 4, 'pinned_points': [-1],
+            'scene.ground': False, 'self_contact.thickness': thickness,
+            'solver.retry_strain': retry}))
+        for k in range(sim.model.level_count):
+            sim.state.q[k] = folded(sim.state.q[k], 1.0)
+            m = sim.state.qd[k].shape[1] // 2
+            sim.state.qd[k][2, m + 1:] = -5.0
+        return sim
+
+    report = thrown(0.5).advance(on_retry=hear)
+    assert report.ok and report.max_strain <= 0.5
+    assert len(heard) == 1 and heard[0][1] == 2
+    assert heard[0][0].extra['refused'].startswith('strain ')
+    sim = thrown(0.5)
+    sim.apply(['set', 'solver.retry_strain', 0.0])
+    report = sim.advance(on_retry=hear)
+    assert report.ok and report.max_strain > 0.5 and sim.solver.retry_strain is None
+    report = Simulation.build(params.resolve({'solver.retry_strain': 1e-4})).advance(
+        on_retry=hear)
+    assert report.ok and report.max_strain > 1e-4 and len(heard) == 1

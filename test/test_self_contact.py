@@ -1031,18 +1031,21 @@ def test_a_stretched_start_is_not_retried_and_the_smallest_steps_go_through():
     """
     ``retry_strain`` refuses a step only from a start within it; the 8 steps go on.
 
-    At 0.01, below what strain limiting keeps (0.1): the first step (from the unstretched
-    fold) is refused at every split and taken as 8 steps however far they stretch; the
-    steps after it start beyond 0.01 and go through at once.
+    At 0.01, below what strain limiting keeps (0.1): the thrown fold's first step is
+    refused at 1, 2 and 4 steps and taken as 8 however far they stretch. The same fold
+    stretched by 2 % along x before it is thrown (a start beyond 0.01) is not retried,
+    its step finding pairs and stretching further.
     """
-    model, state, solver = _thrown(3.0, 0.01)
-    control = Control(model)
-    first, taken = step_with_retries(solver, state, control, H)
+    model, state, solver = _thrown(5.0, 0.01)
+    first, taken = step_with_retries(solver, state, Control(model), H)
     assert first.ok and taken == 8 and first.max_strain > 0.01
     assert first.extra['refused'].startswith('strain ')
-    for _ in range(2):
-        report, taken = step_with_retries(solver, state, control, H)
-        assert report.ok and taken == 1 and report.max_strain > 0.01
+    model, state, solver = _thrown(5.0, 0.01)
+    for q in state.q:
+        q[0] *= 1.02
+    report, taken = step_with_retries(solver, state, Control(model), H)
+    assert report.ok and taken == 1 and report.extra['self_contact_pairs'] > 0
+    assert report.max_strain > 0.02
 
 
 def test_the_hashed_intersection_count_is_the_brute_force_ones():

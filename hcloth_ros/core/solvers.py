@@ -95,13 +95,16 @@ class Solver:
         (relative to the limit).
     :param blowup_strain: a step that leaves a spring stretched beyond this (relative) or
         any value non-finite is refused.
-    :param retry_strain: a step that stretches a spring of the finest simulated level
-        beyond this (relative) from a start where none was is refused too, marked
-        ``stretched``, so that :func:`~hcloth_ros.core.recovery.step_with_retries` takes it
-        again in smaller steps (a cloth falling onto itself at 3 m/s, pushed apart a pair
-        at a time, leaves springs at 1.2 after a 1/60 s step and 0.3-0.4 after four
-        quarter steps: the README); None: off. A start already stretched beyond it (two
-        grippers pulling the cloth taut) is not retried: smaller steps would not undo it.
+    :param retry_strain: a step in which self-contact found pairs and that stretches a
+        spring of the finest simulated level beyond this (relative) from a start where
+        none was is refused too, marked ``stretched``, so that
+        :func:`~hcloth_ros.core.recovery.step_with_retries` takes it again in smaller steps
+        (a cloth falling onto itself at 3 m/s, pushed apart a pair at a time, leaves
+        springs at 1.2 after a 1/60 s step and 0.3-0.4 after four quarter steps: the
+        README); None: off. Not retried: a start already stretched beyond it (two grippers
+        pulling the cloth taut) and a step without self-contact pairs (a gripper sent far:
+        its points reach their target in the first of the smaller steps, so these stretch
+        as much, and a flood of such poses took 15 steps a tick).
     :param builds: ``'serial'`` or ``'parallel'`` kernel builds on every level (or a kernel
         set with their names), or None: the parallel builds on levels large enough to
         split when numba runs several threads (see :mod:`hcloth_ros.core.kernels`).
@@ -461,8 +464,9 @@ class Solver:
         """
         Refuse a non-finite step or a runaway strain, judged on the finest level alone.
 
-        A strain past ``retry_strain`` from a start (``state``, not yet replaced) within it
-        is refused as ``stretched`` (the start's strain is computed only then).
+        A strain past ``retry_strain`` on a step with self-contact pairs, from a start
+        (``state``, not yet replaced) within it, is refused as ``stretched`` (the start's
+        strain is computed only then).
 
         After a step every coarser simulated level is the finest one's points at every
         other row and column (constraint C, the multigrid solver's injection, and the
@@ -482,7 +486,8 @@ class Solver:
             return StepReport(False, f'runaway strain {mx:.3g} > {self.blowup_strain:g} '
                               f'on level {k}: step refused, last good state kept',
                               max_strain=mx, levels=tuple(levels))
-        if self.retry_strain is not None and mx > self.retry_strain:
+        if self.retry_strain is not None and mx > self.retry_strain and \
+                self._extra.get('self_contact_pairs'):
             start = self.kernels(k).strain_stats(state.q[k], state.qd[k],
                                                  self.model.level(k).rest)[0]
             if start <= self.retry_strain:
