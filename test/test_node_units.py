@@ -344,10 +344,10 @@ def test_a_tick_retries_an_overstretched_step_and_names_why():
     def hear(report, steps):
         heard.append((report, steps))
 
-    def thrown(retry, thickness=0.005):
+    def thrown(retry):
         sim = Simulation.build(params.resolve({
             'cloth.resolution': [9, 9], 'cloth.levels': 4, 'pinned_points': [-1],
-            'scene.ground': False, 'self_contact.thickness': thickness,
+            'scene.ground': False, 'self_contact.thickness': 0.005,
             'solver.retry_strain': retry}))
         for k in range(sim.model.level_count):
             sim.state.q[k] = folded(sim.state.q[k], 1.0)
@@ -363,6 +363,8 @@ def test_a_tick_retries_an_overstretched_step_and_names_why():
     sim.apply(['set', 'solver.retry_strain', 0.0])
     report = sim.advance(on_retry=hear)
     assert report.ok and report.max_strain > 0.5 and sim.solver.retry_strain is None
+    sim.apply(['set', 'solver.retry_strain', 0.4])
+    assert sim.solver.retry_strain == 0.4
     report = Simulation.build(params.resolve({'solver.retry_strain': 1e-4})).advance(
         on_retry=hear)
     assert report.ok and report.max_strain > 1e-4 and len(heard) == 1

@@ -115,6 +115,21 @@ def test_newton_tolerance_steps_parameter_reaches_the_solver():
         params.resolve({'solver.newton_tolerance_steps': 'some'})
 
 
+def test_retry_strain_parameter_reaches_the_solver_and_old_recordings_go_without_it():
+    # the node's default 0.5, the solver class's None (off); 0: off
+    values = params.resolve({'cloth.resolution': [5, 5], 'cloth.levels': 2})
+    model = params.build_model(values)
+    assert params.build_solver(model, values).retry_strain == 0.5
+    assert make_solver('multigrid', model).retry_strain is None
+    assert params.build_solver(model, dict(values, **{'solver.retry_strain': 0.0})) \
+        .retry_strain is None
+    # a recording started before the parameter existed replays as it ran: without retries
+    older = {name: value for name, value in values.items() if name != 'solver.retry_strain'}
+    assert params.build_solver(model, older).retry_strain is None
+    with pytest.raises(ValueError, match='retry_strain'):
+        make_solver('multigrid', model, retry_strain=10.0)
+
+
 def test_command_line_assignments_are_yaml_values():
     assert params.assignments(['solver.dt=0.01', 'cloth.levels=5', 'a=null', 'b=[1, 2]',
                                'c=x=y']) == {'solver.dt': 0.01, 'cloth.levels': 5,

@@ -9,6 +9,8 @@ independent of the kernel's interpolation), is a violation. The cloth is folded 
 a triangle of the other layer to meet.
 """
 
+import functools
+
 from hcloth_ros.bench.self_contact import folded, GAP
 from hcloth_ros.core import ClothBuilder, Control, make_scene, make_solver, State
 from hcloth_ros.core import kernels
@@ -188,6 +190,12 @@ def hashed_intersections(q):
     The brute force above takes seconds a state at 129 x 129; the tool's count is checked
     against it (:func:`test_the_hashed_intersection_count_is_the_brute_force_ones`).
     """
+    return _intersections_tool().intersections(q)[0]
+
+
+@functools.lru_cache(maxsize=None)
+def _intersections_tool():
+    """Load ``tools/intersections.py`` once (its kernels compile at each load: 1.3 s)."""
     import importlib.util
     import os
     path = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), 'tools',
@@ -195,7 +203,7 @@ def hashed_intersections(q):
     spec = importlib.util.spec_from_file_location('intersections_tool', path)
     tool = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(tool)
-    return tool.intersections(q)[0]
+    return tool
 
 
 def folded_model(resolution=(9, 9), levels=3, ground=0.0):
@@ -1039,7 +1047,7 @@ def test_a_stretched_start_is_not_retried_and_the_smallest_steps_go_through():
     model, state, solver = _thrown(5.0, 0.01)
     first, taken = step_with_retries(solver, state, Control(model), H)
     assert first.ok and taken == 8 and first.max_strain > 0.01
-    assert first.extra['refused'].startswith('strain ')
+    assert first.extra['refused'].startswith('strain ') and solver.retry_strain == 0.01
     model, state, solver = _thrown(5.0, 0.01)
     for q in state.q:
         q[0] *= 1.02
@@ -1252,9 +1260,9 @@ def test_a_cloth_folded_twice_does_not_tangle_where_its_creases_cross(name):
 
 
 @pytest.mark.slow
-def test_the_double_fold_at_129_stepped_as_the_node_steps_keeps_its_springs():
+def test_the_double_fold_at_129_with_the_nodes_retries_keeps_its_springs():
     """
-    The double fold above at 129 x 129, stepped as the node steps (overstretched steps retried).
+    The double fold above at 129 x 129, with the node's retries of overstretched steps.
 
     It regressed twice unseen while only 65 x 65 was tested (README, the self-contact
     section's known limits: 2.08, then 8.33 with every step refused, then 2.19 and 1.16;
@@ -1263,22 +1271,25 @@ def test_the_double_fold_at_129_stepped_as_the_node_steps_keeps_its_springs():
     strain is 0.45. Asserted: every step goes through, ends within ``retry_strain`` unless
     it started beyond it or took the 8 steps, the largest strain stays under 1 (ten times
     the strain limit), and no edge goes through a triangle (every third step after the
-    landing; about 70 s).
+    landing). Some step is retried: the scene still tests the retries.
     """
     from hcloth_ros.bench.self_contact import scene_setup, second_fold
     model, state, control = scene_setup(129, 'folded')
     solver = make_solver('multigrid', model, thickness=0.004, retry_strain=0.5)
-    step, largest, before = 0, 0.0, 0.0
+    step, largest, before, retried = 0, 0.0, 0.0, 0
 
     def advance(count):
-        nonlocal step, largest, before
+        nonlocal step, largest, before, retried
         for _ in range(count):
             step += 1
             report, taken = step_with_retries(solver, state, control, 1 / 60)
             assert report.ok, (step, report.reason)
-            assert report.max_strain <= 0.5 or before > 0.5 or taken == 8, \
+            met = report.extra.get('self_contact_pairs') or \
+                report.extra.get('self_contact_later_pairs')
+            assert report.max_strain <= 0.5 or before > 0.5 or taken == 8 or not met, \
                 (step, report.max_strain, taken)
             before, largest = report.max_strain, max(largest, report.max_strain)
+            retried += taken > 1
             if step >= 45 and step % 3 == 0:
                 assert hashed_intersections(state.q[-1]) == 0, step
 
@@ -1289,7 +1300,7 @@ def test_the_double_fold_at_129_stepped_as_the_node_steps_keeps_its_springs():
         advance(1)
     control.release('fold')
     advance(30)
-    assert largest < 1.0
+    assert largest < 1.0 and retried > 0
 
 
 def accordion(q, height, gap, layers):

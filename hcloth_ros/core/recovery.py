@@ -35,11 +35,13 @@ def step_with_retries(solver, state, control, dt, splits=SPLITS):
 
     n takes the values of ``splits`` in turn. Returns ``(report, n)``: the last report and
     the steps it took (1: the first try went through; 0: every try was refused, and state
-    and moving bodies are where they were). A report after retries holds the first
-    refusal's reason in ``extra['refused']``. Held points reach their targets and moving
-    bodies their poses in the first of the n steps, then stay. The last n takes its steps
-    however far they stretch the springs (below ``blowup_strain``): a strain that smaller
-    steps do not bring under ``retry_strain`` is kept rather than the cloth stopped.
+    and moving bodies are where they were; the report is the first refusal, or the last
+    one if the first was only ``stretched``). A report after retries holds why the first
+    try was refused in ``extra['refused']`` (its reason without "step refused, last good
+    state kept"). Held points reach their targets and moving bodies their poses in the
+    first of the n steps, then stay. The last n takes its steps however far they stretch
+    the springs (below ``blowup_strain``): a strain that smaller steps do not bring under
+    ``retry_strain`` is kept rather than the cloth stopped.
     """
     report = solver.step(state, control, dt)
     if report.ok:
@@ -55,6 +57,7 @@ def step_with_retries(solver, state, control, dt, splits=SPLITS):
                     control.bodies.restore(starts)
                     break
             else:
-                report.extra['refused'] = refused.reason
+                report.extra['refused'] = refused.reason.split(': step refused')[0]
                 return report, n
-    return refused, 0
+    # a stretched first try was not what stopped the last, which ran without that check
+    return (report if refused.stretched else refused), 0

@@ -99,9 +99,9 @@ class Solver:
         spring of the finest simulated level beyond this (relative) from a start where
         none was is refused too, marked ``stretched``, so that
         :func:`~hcloth_ros.core.recovery.step_with_retries` takes it again in smaller steps
-        (a cloth falling onto itself at 3 m/s, pushed apart a pair at a time, leaves
-        springs at 1.2 after a 1/60 s step and 0.3-0.4 after four quarter steps: the
-        README); None: off. Not retried: a start already stretched beyond it (two grippers
+        (the 129 x 129 double fold's cloth falling back onto itself at up to 3 m/s, pushed
+        apart a pair at a time, left springs at 1.16; retried, 0.45: the README); None:
+        off. Not retried: a start already stretched beyond it (two grippers
         pulling the cloth taut) and a step without self-contact pairs (a gripper sent far:
         its points reach their target in the first of the smaller steps, so these stretch
         as much, and a flood of such poses took 15 steps a tick).
@@ -436,8 +436,10 @@ class Solver:
                 if self._wrap(k, state, holds, h_post, limit, scene, before, velocity):
                     # the rounds moved points: self-contact has the last word again, round
                     # the points they moved (elsewhere its last call left nothing near)
-                    self.self_contact.apply(self, levels, state, holds, h,
-                                            moved=np.any(self._q[k] != before, axis=0))
+                    later = self.self_contact.apply(self, levels, state, holds, h,
+                                                    moved=np.any(self._q[k] != before, axis=0))
+                    if later:
+                        self._extra['self_contact_later_pairs'] = later
                     self._inject_down(levels)
         if self._extra.get('self_contact_refused'):
             report = StepReport(False, 'self-contact: a point moved more than the cloth is '
@@ -486,8 +488,9 @@ class Solver:
             return StepReport(False, f'runaway strain {mx:.3g} > {self.blowup_strain:g} '
                               f'on level {k}: step refused, last good state kept',
                               max_strain=mx, levels=tuple(levels))
-        if self.retry_strain is not None and mx > self.retry_strain and \
-                self._extra.get('self_contact_pairs'):
+        met = self._extra.get('self_contact_pairs') or \
+            self._extra.get('self_contact_later_pairs')
+        if self.retry_strain is not None and mx > self.retry_strain and met:
             start = self.kernels(k).strain_stats(state.q[k], state.qd[k],
                                                  self.model.level(k).rest)[0]
             if start <= self.retry_strain:
