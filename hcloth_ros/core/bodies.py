@@ -124,6 +124,13 @@ class MovingBodies:
         row[layout.T_START:layout.T_START + 3] = body.start_translation
         return row
 
+    def moving(self):
+        """Whether a placed body's pose at the end of the next step is not where it starts."""
+        return any(b.rotation is not None and not (
+            np.array_equal(b.rotation, b.start_rotation)
+            and np.array_equal(b.translation, b.start_translation))
+            for b in self._bodies.values())
+
     def starts(self):
         """Return where every body starts the next step (to :meth:`restore` after a retry)."""
         return {name: (b.start_rotation, b.start_translation)
