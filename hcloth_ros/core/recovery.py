@@ -3,8 +3,9 @@ Recovery from a refused step: the same time span again in smaller steps.
 
 A step is refused when it would write a non-finite state or stretch a spring beyond
 ``blowup_strain`` (:class:`~hcloth_ros.core.solvers.Solver`), or, with the solver's
-``retry_strain`` set, when self-contact found pairs and it stretches one beyond that from
-a start where none was (``stretched``); the state keeps its last good value. Stiffness the
+``retry_strain`` set, when self-contact found pairs, no grasp or moving body moves the
+cloth, and it stretches one beyond that from a start where none was (``stretched``); the
+state keeps its last good value. Stiffness the
 step is too long for can do that at the node's step and not at half or a quarter of it,
 and so can layers of the cloth meeting fast: self-contact pushes them apart a pair at a
 time, and the shorter the step the less each push stretches the springs round it. A grasp
