@@ -2,6 +2,7 @@
 
 import os
 
+from conftest import load_tool
 from hcloth_ros import params
 from hcloth_ros.demo import headless as demo
 import matplotlib.image as mpimg
@@ -148,13 +149,8 @@ def _fold_in_the_engine(seed, overrides=None, shed=None, restore=None):
     ``overrides``: parameter values; ``shed``, ``restore``: the ticks the finest level is
     dropped and brought back.
     """
-    import importlib.util
     from hcloth_ros.demo.fold_metrics import fold_metrics
-    path = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))),
-                        'tools', 'fold_jitter.py')
-    spec = importlib.util.spec_from_file_location('fold_jitter', path)
-    jitter = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(jitter)
+    jitter = load_tool('fold_jitter')
     before, after = jitter.run(seed, overrides=overrides, shed=shed, restore=restore)
     side = int(round(np.sqrt(len(before))))
     metrics = fold_metrics(before.reshape(side, side, 3), after.reshape(side, side, 3))

@@ -3,6 +3,7 @@
 import glob
 import os
 
+from conftest import load_tool
 from hcloth_ros import params
 from hcloth_ros.core import make_solver
 import numpy as np
@@ -59,11 +60,7 @@ def test_defaults_are_the_hanging_scene():
 def test_readme_parameter_table_is_the_specs():
     # the table tools/param_table.py prints, row for row: names, types, defaults, what is
     # allowed, runtime or not, meaning
-    import importlib.util
-    spec = importlib.util.spec_from_file_location(
-        'param_table', os.path.join(os.path.dirname(CONFIG), 'tools', 'param_table.py'))
-    tool = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(tool)
+    tool = load_tool('param_table')
     readme = open(os.path.join(os.path.dirname(CONFIG), 'README.md')).read()
     assert tool.table() in readme
 

@@ -9,8 +9,7 @@ independent of the kernel's interpolation), is a violation. The cloth is folded 
 a triangle of the other layer to meet.
 """
 
-import functools
-
+from conftest import load_tool
 from hcloth_ros.bench.self_contact import folded, GAP
 from hcloth_ros.core import ClothBuilder, Control, make_scene, make_solver, State
 from hcloth_ros.core import kernels
@@ -190,20 +189,7 @@ def hashed_intersections(q):
     The brute force above takes seconds a state at 129 x 129; the tool's count is checked
     against it (:func:`test_the_hashed_intersection_count_is_the_brute_force_ones`).
     """
-    return _intersections_tool().intersections(q)[0]
-
-
-@functools.lru_cache(maxsize=None)
-def _intersections_tool():
-    """Load ``tools/intersections.py`` once (its kernels compile at each load: 1.3 s)."""
-    import importlib.util
-    import os
-    path = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), 'tools',
-                        'intersections.py')
-    spec = importlib.util.spec_from_file_location('intersections_tool', path)
-    tool = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(tool)
-    return tool
+    return load_tool('intersections').intersections(q)[0]
 
 
 def folded_model(resolution=(9, 9), levels=3, ground=0.0):

@@ -413,7 +413,6 @@ class Solver:
         self._touched = False      # whether an obstacle pushed a point this step
         self._bodies, self._dt = control.bodies.packed(), h
         self._finest_now = levels[-1]
-        self._drives = self._driven(control, state, levels[-1])
         self._inject = False       # whether a body moved points a coarser level shares
         self._deferred = None      # the finest level's rounds, when self-contact runs first
         for k in levels:
@@ -449,7 +448,7 @@ class Solver:
                                 'far?): step refused, last good state kept',
                                 levels=tuple(levels))
         else:
-            report = self._check(levels, state)
+            report = self._check(levels, state, control)
         if report.ok:
             # the new state goes in by swapping arrays (no copy): State.q[k] and
             # State.qd[k] are other array objects after every step (see State)
@@ -482,13 +481,11 @@ class Solver:
         now = state.q[k].reshape(3, -1)[:, holds.drive_index]
         return bool(np.max(np.abs(holds.drive_target - now)) > 1e-6)
 
-    def _check(self, levels, state):
+    def _check(self, levels, state, control):
         """
         Refuse a non-finite step or a runaway strain, judged on the finest level alone.
 
-        A strain past ``retry_strain`` on a step with self-contact pairs and no grasp or
-        body moving the cloth, from a start (``state``, not yet replaced) within it, is
-        refused as ``stretched`` (the start's strain is computed only then).
+        Then, with ``retry_strain``, a stretched one (:meth:`_stretched`).
 
         After a step every coarser simulated level is the finest one's points at every
         other row and column (constraint C, the multigrid solver's injection, and the
@@ -508,18 +505,32 @@ class Solver:
             return StepReport(False, f'runaway strain {mx:.3g} > {self.blowup_strain:g} '
                               f'on level {k}: step refused, last good state kept',
                               max_strain=mx, levels=tuple(levels))
-        met = self._extra.get('self_contact_pairs') or \
-            self._extra.get('self_contact_later_pairs')
-        if self.retry_strain is not None and mx > self.retry_strain and met and \
-                not self._drives:
-            start = self.kernels(k).strain_stats(state.q[k], state.qd[k],
-                                                 self.model.level(k).rest)[0]
-            if start <= self.retry_strain:
-                return StepReport(False, f'strain {mx:.3g} > retry_strain '
-                                  f'{self.retry_strain:g} on level {k} (from {start:.3g}): '
-                                  'step refused, last good state kept', max_strain=mx,
-                                  levels=tuple(levels), stretched=True)
-        return StepReport(True, max_strain=mx, mean_strain=mean, levels=tuple(levels))
+        return self._stretched(levels, state, control, mx) or \
+            StepReport(True, max_strain=mx, mean_strain=mean, levels=tuple(levels))
+
+    def _stretched(self, levels, state, control, mx):
+        """
+        Return the refusal of a step that stretched the finest springs to ``mx``, or None.
+
+        Refused (``stretched``): past ``retry_strain``, on a step in which self-contact
+        found pairs and no grasp or body moved the cloth (:meth:`_driven`), from a start
+        (``state``, not yet replaced) within it. The rest is computed only past it.
+        """
+        if self.retry_strain is None or not mx > self.retry_strain:
+            return None
+        if not (self._extra.get('self_contact_pairs')
+                or self._extra.get('self_contact_later_pairs')):
+            return None
+        k = levels[-1]
+        if self._driven(control, state, k):
+            return None
+        start = self.kernels(k).strain_stats(state.q[k], state.qd[k],
+                                             self.model.level(k).rest)[0]
+        if start > self.retry_strain:
+            return None
+        return StepReport(False, f'strain {mx:.3g} > retry_strain {self.retry_strain:g} on '
+                          f'level {k} (from {start:.3g}): step refused, last good state kept',
+                          max_strain=mx, levels=tuple(levels), stretched=True)
 
 
 class _SingleLevel(Solver):
