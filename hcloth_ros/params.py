@@ -102,11 +102,11 @@ PARAMS = [
     Param('solver.strain_limit', 0.1, 'largest spring stretch kept by strain limiting '
           '(0.1 = 10 %; multigrid: on the eq. 7 levels only); 0 switches it off', 0.0, 10.0,
           False),
-    Param('solver.retry_strain', 0.5, 'a step in which self-contact found pairs, no grasp '
-          'or moving body moves the cloth, and a finest spring stretches beyond this (0.5 = '
-          '50 %) from a start where none was is taken again as 2, then 4, then 8 smaller '
-          'steps (the last however far they stretch): layers of the cloth meeting fast; 0 '
-          'switches it off', 0.0, 5.0, False),
+    Param('solver.retry_strain', 0.5, 'a step in which self-contact found pairs and a '
+          'finest spring stretches beyond this (0.5 = 50 %) from a start where none was is '
+          'taken again as 2, then 4, then 8 smaller steps (the last however far they '
+          'stretch; grippers and bodies move evenly over them): layers of the cloth meeting '
+          'fast; 0 switches it off', 0.0, 5.0, False),
     Param('solver.dt', 1 / 60, 'simulated seconds per step (s)', 1e-6, 0.1, False),
     Param('solver.substeps', 1, 'solver steps per timer tick', 1, 100, False),
     Param('solver.contact_rounds', 16, 'most rounds of strain limiting '

@@ -102,14 +102,20 @@ class Simulation:
         Run one tick: ``substeps`` steps of ``dt``, each retried in smaller steps if refused.
 
         ``on_retry(report, steps)`` hears of a step that needed retries; the tick stops at
-        a step no retry got through. Returns the last step's report.
+        a step no retry got through. Grasp and body poses set before the tick are reached
+        at its end, evenly over its steps (``Control.follow``).
         """
-        for _ in range(self.substeps):
+        plan = self.control.plan() if self.substeps > 1 else None
+        for i in range(1, self.substeps + 1):
+            if plan is not None:
+                self.control.follow(plan, i / self.substeps)
             report, steps = step_with_retries(self.solver, self.state, self.control, self.dt)
             if steps != 1 and on_retry is not None:
                 on_retry(report, steps)
             if not report.ok:
                 break
+        if plan is not None:
+            self.control.follow(plan, 1.0)    # a stopped tick: the poses asked stay asked
         return report
 
     # --- the commands -------------------------------------------------------------------

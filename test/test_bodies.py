@@ -312,13 +312,13 @@ def test_a_body_moves_from_its_last_committed_pose():
     model = _flat_cloth((-0.2, -0.2, 1.0))
     state, control = State.at_rest(model), Control(model)
     control.bodies.add('ball', 'sphere', [0.05])
-    assert not control.bodies.moving()                      # not placed yet
+    assert control.bodies.plan() == {}                      # not placed yet
     control.bodies.set_pose('ball', np.eye(3), (1, 0, 0))
     start = control.bodies.packed()[0].copy()
     assert np.array_equal(start[5:17], start[17:29])      # appears at rest
-    assert not control.bodies.moving()
     control.bodies.set_pose('ball', np.eye(3), (2, 0, 0))
-    assert control.bodies.moving()
+    (_, start), (_, end) = control.bodies.plan()['ball']
+    assert start.tolist() == [1, 0, 0] and end.tolist() == [2, 0, 0]
     # refused after the whole step ran (bodies, contact): the cloth starts stretched by half
     # and a stretch of 1 % counts as a blow-up (one step leaves about 7 %)
     for q in state.q:
@@ -329,7 +329,8 @@ def test_a_body_moves_from_its_last_committed_pose():
     state = State.at_rest(model)
     assert make_solver('multigrid', model).step(state, control, DT).ok
     assert control.bodies.packed()[0][26] == 2.0                           # committed
-    assert not control.bodies.moving()
+    (_, start), (_, end) = control.bodies.plan()['ball']
+    assert start.tolist() == end.tolist() == [2, 0, 0]
 
 
 def _body_row(kind, size, r0, t0, r1, t1):

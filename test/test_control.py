@@ -159,6 +159,51 @@ def test_set_target_reaches_target_in_one_step(name):
     np.testing.assert_allclose(state.position_of(model, pid, 1), target2, rtol=0, atol=1e-12)
 
 
+@pytest.mark.parametrize('name', ('hierarchical', 'multigrid', 'implicit'))
+def test_a_grasp_pose_followed_over_several_steps_is_reached_evenly(name):
+    """
+    A frame turned 90 degrees about z and moved 8 cm, reached over four steps.
+
+    Step i follows i / 4 of the way (``Control.follow``, as a tick's substeps and a
+    refused step's retries do): the held point is where the frame a quarter, half, ...
+    of the way carries it (the rotation at constant angular velocity, slerp), exactly
+    as a one-step grasp is (1e-12), so it moves 2 cm and 22.5 degrees a step rather than
+    all of it in the first. A committed step is the next one's start.
+    """
+    model = small_model()
+    state, control = State.at_rest(model), Control(model)
+    pid = int(model.level(1).grid_to_id[4, 4])
+    here = state.position_of(model, pid, 1)
+    control.grasp('hand', [pid], state)                 # frame at identity now
+    control.move_grasp('hand', rotation((0, 0, 1), math.pi / 2), (0.08, 0.0, 0.0))
+    plan, solver = control.plan(), make(name, model, 1)
+    for i in range(1, 5):
+        control.follow(plan, i / 4)
+        assert solver.step(state, control, 1.0 / 240.0).ok
+        expected = rotation((0, 0, 1), i * math.pi / 8) @ here + [0.02 * i, 0.0, 0.0]
+        np.testing.assert_allclose(state.position_of(model, pid, 1), expected, atol=1e-12)
+    (start, end), = control.plan().grasps.values()
+    assert all(np.array_equal(a, b) for a, b in zip(start, end))   # committed there
+
+
+def test_a_body_followed_over_several_steps_moves_evenly_and_a_rewind_undoes_them():
+    """A body's start and end poses step a quarter of the way each step; rewind restores both."""
+    model = small_model()
+    state, control = State.at_rest(model), Control(model)
+    control.bodies.add('ball', 'sphere', [0.05])
+    control.bodies.set_pose('ball', np.eye(3), (3.0, 0.0, 0.0))
+    control.bodies.set_pose('ball', np.eye(3), (3.0, 0.4, 0.0))
+    plan, solver = control.plan(), make_solver('multigrid', model)
+    for i in range(1, 3):
+        control.follow(plan, i / 4)
+        assert solver.step(state, control, 1.0 / 240.0).ok
+    (_, start), (_, end) = control.bodies.plan()['ball']
+    assert start.tolist() == end.tolist() == pytest.approx([3.0, 0.2, 0.0], abs=1e-15)
+    control.rewind(plan)
+    (_, start), (_, end) = control.bodies.plan()['ball']
+    assert start.tolist() == [3.0, 0.0, 0.0] and end.tolist() == [3.0, 0.4, 0.0]
+
+
 def test_pin_wins_over_grasp():
     # control.py: "Pins win over grasps for a point that is both"
     model = small_model()

@@ -368,3 +368,50 @@ def test_a_tick_retries_an_overstretched_step_and_names_why():
     report = Simulation.build(params.resolve({'solver.retry_strain': 1e-4})).advance(
         on_retry=hear)
     assert report.ok and report.max_strain > 1e-4 and len(heard) == 1
+
+
+def test_a_tick_of_substeps_reaches_the_poses_asked_evenly_and_a_stopped_tick_keeps_them():
+    """
+    ``solver.substeps`` 4: the poses set before a tick are reached at its end, evenly.
+
+    A gripper pose and a body pose move a quarter of the way a step (not all of it in the
+    first step, then rest: the README's known limit until 2026-11-29). A tick stopped by
+    a refused step leaves the poses asked as they were asked, from where the last
+    committed step left them.
+    """
+    from hcloth_ros.core.kernels.bodies import T_END, T_START
+    from hcloth_ros.core.solvers import StepReport
+
+    def run(refuse_after):
+        sim = Simulation.build(params.resolve({'cloth.resolution': [9, 9], 'cloth.levels': 2,
+                                               'pinned_points': [-1],
+                                               'solver.substeps': 4}))
+        sim.control.bodies.add('ball', 'sphere', [0.05])
+        sim.apply(['body', 'ball', np.eye(3).tolist(), [3.0, 0.0, 0.0]])
+        sim.apply(['grasp', 'g', [0], np.eye(3).tolist(), [0.0, 0.0, 0.0]])
+        sim.advance()
+        sim.apply(['move', 'g', np.eye(3).tolist(), [0.0, 0.0, 0.08]])
+        sim.apply(['body', 'ball', np.eye(3).tolist(), [3.0, 0.4, 0.0]])
+        asked, step = [], sim.solver.step
+
+        def recording_step(state, control, dt):
+            if len(asked) >= refuse_after:
+                return StepReport(False, 'refused by the test')
+            k = sim.solver.levels()[-1]
+            ball = control.bodies.packed()[0]
+            asked.append((control.holds(k).drive_target[2, 0] - state.q[k][2, 0, 0],
+                          ball[T_END + 1] - ball[T_START + 1]))
+            return step(state, control, dt)
+        sim.solver.step = recording_step
+        return sim, asked, sim.advance()
+
+    sim, asked, report = run(99)
+    assert report.ok and len(asked) == 4
+    np.testing.assert_allclose(asked, [[0.02, 0.1]] * 4, atol=1e-12)   # 2 and 10 cm a step
+    (_, start), (_, end) = sim.control.bodies.plan()['ball']
+    assert start.tolist() == end.tolist() == [3.0, 0.4, 0.0]
+    sim, asked, report = run(1)
+    assert not report.ok and len(asked) == 1
+    (_, start), (_, end) = sim.control.plan().grasps['g']
+    assert start.tolist() == pytest.approx([0.0, 0.0, 0.02], abs=1e-15)
+    assert end.tolist() == [0.0, 0.0, 0.08]

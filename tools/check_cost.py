@@ -41,7 +41,7 @@ def main(argv=None):
             solver.kernels(k).strain_stats(solver._q[k], solver._qd[k], model.level(k).rest)
 
     def finest():
-        solver._check(levels)
+        solver._check(levels, state)
 
     times = {every_level: [], finest: []}
     for i in range(args.calls):

@@ -15,7 +15,7 @@ length (its axis is the body's z axis, a finger's or a link's length).
 from dataclasses import dataclass
 
 from hcloth_ros.core.kernels import bodies as layout
-from hcloth_ros.core.poses import check_rotation, check_vector
+from hcloth_ros.core.poses import check_rotation, check_vector, part_way
 import numpy as np
 
 # sizes each shape takes and its kernel code
@@ -124,23 +124,24 @@ class MovingBodies:
         row[layout.T_START:layout.T_START + 3] = body.start_translation
         return row
 
-    def moving(self):
-        """Whether a placed body's pose at the end of the next step is not where it starts."""
-        return any(b.rotation is not None and not (
-            np.array_equal(b.rotation, b.start_rotation)
-            and np.array_equal(b.translation, b.start_translation))
-            for b in self._bodies.values())
+    def plan(self):
+        """Return ``{name: (start pose, end pose)}`` of the placed bodies (to split a step)."""
+        return {name: ((b.start_rotation, b.start_translation), (b.rotation, b.translation))
+                for name, b in self._bodies.items() if b.rotation is not None}
 
-    def starts(self):
-        """Return where every body starts the next step (to :meth:`restore` after a retry)."""
-        return {name: (b.start_rotation, b.start_translation)
-                for name, b in self._bodies.items()}
+    def follow(self, plan, s):
+        """Put each body of ``plan`` a fraction ``s`` of its way at the next step's end."""
+        for name, (start, end) in plan.items():
+            body = self._bodies[name]
+            body.rotation, body.translation = part_way(start, end, s)
+        self._packed = None
 
-    def restore(self, starts):
-        """Start the next step where :meth:`starts` said (steps since then are undone)."""
-        for name, (rotation, translation) in starts.items():
-            self._bodies[name].start_rotation = rotation
-            self._bodies[name].start_translation = translation
+    def rewind(self, plan):
+        """Undo the steps taken since ``plan``: each body starts and ends where it says."""
+        for name, (start, end) in plan.items():
+            body = self._bodies[name]
+            (body.start_rotation, body.start_translation), (body.rotation, body.translation) \
+                = start, end
         self._packed = None
 
     def commit(self):

@@ -25,16 +25,32 @@ from dataclasses import dataclass
 from hcloth_ros.core import buffers
 from hcloth_ros.core.bodies import MovingBodies
 from hcloth_ros.core.kernels.layout import DRIVEN, FREE, PINNED  # noqa: F401
-from hcloth_ros.core.poses import check_rotation, check_vector
+from hcloth_ros.core.poses import check_rotation, check_vector, part_way
 import numpy as np
 
 
 @dataclass
 class _Grasp:
-    rotation: np.ndarray        # (3, 3)
+    rotation: np.ndarray        # (3, 3), at the end of the next step
     translation: np.ndarray     # (3,)
     grid_index: list            # per level: int64 (m,)
     local: list                 # per level: float64 (3, m), coordinates in the frame
+    start_rotation: np.ndarray = None     # at the end of the last committed step
+    start_translation: np.ndarray = None
+
+
+@dataclass
+class Plan:
+    """
+    Where every grasp frame and moving body starts and ends the coming step(s).
+
+    Taken by :meth:`Control.plan` before a span of time is cut into several steps (a
+    tick's substeps, a refused step's retries): ``grasps`` and ``bodies`` map a name to
+    ``((start rotation, start translation), (end rotation, end translation))``.
+    """
+
+    grasps: dict
+    bodies: dict
 
 
 @dataclass
@@ -124,11 +140,17 @@ class Control:
             x = state.q[k].reshape(3, -1)[:, g]
             grid_index.append(np.ascontiguousarray(g))
             local.append(np.ascontiguousarray(r.T @ (x - p[:, None])))
-        self._grasps[name] = _Grasp(r, p, grid_index, local)
+        self._grasps[name] = _Grasp(r, p, grid_index, local, r, p)
         self._touch()
 
     def move_grasp(self, name, rotation, translation):
-        """Set a grasp frame's pose; its points follow rigidly from the next step."""
+        """
+        Set a grasp frame's pose at the end of the next step; its points follow rigidly.
+
+        They move there from where the frame was at the end of the last committed step
+        (its pose when grasped, for a new grasp). A pose that stays set for several steps
+        (:meth:`follow`) is reached evenly over them.
+        """
         if name not in self._grasps:
             raise KeyError(f'no grasp named {name!r} (have {self.grasp_names})')
         rotation = check_rotation(rotation)
@@ -159,6 +181,48 @@ class Control:
     def grasped_ids(self, name):
         """Finest-level grid indices held by a grasp (for display)."""
         return self._grasps[name].grid_index[-1].copy()
+
+    # --- the motion of a step --------------------------------------------------------
+    def commit(self):
+        """
+        Start the next step where every grasp frame and body is now.
+
+        The solver calls it after a committed step; a grasp frame that is not moved again
+        then holds its points still.
+        """
+        for g in self._grasps.values():
+            g.start_rotation, g.start_translation = g.rotation, g.translation
+        self.bodies.commit()
+
+    def plan(self):
+        """Return where grasps and bodies start and end the next step (a :class:`Plan`)."""
+        return Plan({name: ((g.start_rotation, g.start_translation),
+                            (g.rotation, g.translation))
+                     for name, g in self._grasps.items()}, self.bodies.plan())
+
+    def follow(self, plan, s):
+        """
+        Ask every grasp and body of ``plan`` to be a fraction ``s`` of its way at the step's end.
+
+        Cutting a span into n steps, step i (from 1) follows ``i / n``: the grasped points
+        and the bodies then move evenly over the span, at the speed the span's poses ask,
+        instead of reaching their poses in the first step and resting. ``s`` = 1 puts them
+        back at the plan's ends. Grasps released since the plan are left alone.
+        """
+        for name, (start, end) in plan.grasps.items():
+            g = self._grasps.get(name)
+            if g is not None:
+                g.rotation, g.translation = part_way(start, end, s)
+        self.bodies.follow(plan.bodies, s)
+
+    def rewind(self, plan):
+        """Undo the steps taken since ``plan``: every start and end as it says."""
+        for name, (start, end) in plan.grasps.items():
+            g = self._grasps.get(name)
+            if g is not None:
+                (g.start_rotation, g.start_translation), (g.rotation, g.translation) = \
+                    start, end
+        self.bodies.rewind(plan.bodies)
 
     # --- kinematic targets ------------------------------------------------------------
     def set_target(self, point_id, position, state):

@@ -58,6 +58,40 @@ def matrix_to_quaternion(rotation):
     return tuple(q if q[3] >= 0 else -q)
 
 
+def slerp(r0, r1, s):
+    """
+    Return the rotation a fraction ``s`` of the way from ``r0`` to ``r1`` (the shorter arc).
+
+    At a constant angular velocity: a grasp or a body whose pose is set once for several
+    steps turns evenly over them. ``s`` = 1 returns ``r1`` itself (bit for bit).
+    """
+    if s >= 1.0:
+        return r1
+    q0 = np.array(matrix_to_quaternion(r0))
+    q1 = np.array(matrix_to_quaternion(r1))
+    c = float(q0 @ q1)
+    if c < 0.0:             # q and -q are one rotation: take the shorter way
+        q1, c = -q1, -c
+    angle = np.arccos(min(c, 1.0))
+    if angle < 1e-9:
+        q = q0 + s * (q1 - q0)
+    else:
+        q = (np.sin((1.0 - s) * angle) * q0 + np.sin(s * angle) * q1) / np.sin(angle)
+    return quaternion_to_matrix(*q)
+
+
+def part_way(start, end, s):
+    """
+    Return the pose a fraction ``s`` of the way from ``start`` to ``end``.
+
+    Each pose is ``(rotation, translation)``; the translation moves in a straight line
+    and the rotation by :func:`slerp`. ``s`` = 1 returns ``end``'s arrays themselves.
+    """
+    if s >= 1.0:
+        return end
+    return slerp(start[0], end[0], s), start[1] + s * (end[1] - start[1])
+
+
 def rotation_between(a, b):
     """Return the rotation matrix that turns unit vector a onto unit vector b (shortest)."""
     a = np.asarray(a, float) / np.linalg.norm(a)

@@ -3,14 +3,14 @@ Recovery from a refused step: the same time span again in smaller steps.
 
 A step is refused when it would write a non-finite state or stretch a spring beyond
 ``blowup_strain`` (:class:`~hcloth_ros.core.solvers.Solver`), or, with the solver's
-``retry_strain`` set, when self-contact found pairs, no grasp or moving body moves the
-cloth, and it stretches one beyond that from a start where none was (``stretched``); the
-state keeps its last good value. Stiffness the
-step is too long for can do that at the node's step and not at half or a quarter of it,
-and so can layers of the cloth meeting fast: self-contact pushes them apart a pair at a
-time, and the shorter the step the less each push stretches the springs round it. A grasp
-or a body that jumps is not helped: held points and bodies reach their poses in the first
-of the smaller steps (nothing is interpolated).
+``retry_strain`` set, when self-contact found pairs and it stretches one beyond that
+from a start where none was (``stretched``); the state keeps its last good value.
+Stiffness the step is too long for can do that at the node's step and not at half or a
+quarter of it, and so can layers of the cloth meeting fast: self-contact pushes them
+apart a pair at a time, and the shorter the step the less each push stretches the
+springs round it. Grasps and moving bodies move evenly over the smaller steps, at the
+speed the step asked of them (:meth:`Control.follow
+<hcloth_ros.core.control.Control.follow>`).
 """
 
 from contextlib import contextmanager
@@ -35,27 +35,27 @@ def step_with_retries(solver, state, control, dt, splits=SPLITS):
     Advance ``state`` by ``dt``; if refused, again from the same start in n steps of dt/n.
 
     n takes the values of ``splits`` in turn. Returns ``(report, n)``: the last report and
-    the steps it took (1: the first try went through; 0: every try was refused, and state
-    and moving bodies are where they were; the report is the first refusal, or the last
-    one if the first was only ``stretched``). A report after retries holds why the first
-    try was refused in ``extra['refused']`` (its reason without "step refused, last good
-    state kept"). Held points reach their targets and moving bodies their poses in the
-    first of the n steps, then stay. The last n takes its steps however far they stretch
-    the springs (below ``blowup_strain``): a strain that smaller steps do not bring under
-    ``retry_strain`` is kept rather than the cloth stopped.
+    the steps it took (1: the first try went through; 0: every try was refused, and the
+    state, grasps and moving bodies are where they were; the report is the first refusal,
+    or the last one if the first was only ``stretched``). A report after retries holds why
+    the first try was refused in ``extra['refused']`` (its reason without "step refused,
+    last good state kept"). Step i of n asks grasps and bodies to be i / n of their way to
+    the poses the step asked (``control.follow``). The last n takes its steps however far
+    they stretch the springs (below ``blowup_strain``): a strain that smaller steps do not
+    bring under ``retry_strain`` is kept rather than the cloth stopped.
     """
     report = solver.step(state, control, dt)
     if report.ok:
         return report, 1
-    refused = report
+    refused, start, plan = report, state.copy(), control.plan()
     for n in splits:
-        start, starts = state.copy(), control.bodies.starts()
         with _stretch_allowed(solver, n == splits[-1]):
-            for _ in range(n):
+            for i in range(1, n + 1):
+                control.follow(plan, i / n)
                 report = solver.step(state, control, dt / n)
                 if not report.ok:
                     state.assign(start)
-                    control.bodies.restore(starts)
+                    control.rewind(plan)
                     break
             else:
                 report.extra['refused'] = refused.reason.split(': step refused')[0]

@@ -101,6 +101,8 @@ class SelfContact:
         self._clean_key = None      # (level, time) of the step that _clean is of
         self._reuse = BOXES_NEW     # what the next call may keep of the last one's boxes
         self._patches = None        # what the kernel keeps between a step's calls
+        self._noted = None          # the triangles points lie on after the last committed step
+        self._uncommitted = False   # whether a step since then changed them
 
     def _due(self, k, state):
         """
@@ -237,14 +239,18 @@ class SelfContact:
 
         Every step, checked or not. What a point lies on is known from the pushes of the
         checks before (the kernel notes them); after a reset or a change of the finest
-        level it is forgotten. ``self_contact_carried`` in the step's report: the points
-        carried.
+        level it is forgotten. A refused step's notes are of positions the retry does not
+        start from: they go back to the last committed step's (:meth:`committed`).
+        ``self_contact_carried`` in the step's report: the points carried.
         """
         lv = solver.model.level(k)
         _, _, support = self._buffers(lv.shape)
         lies_on = self._patches[-1]
         if self._restarted(k, state):
             lies_on[:] = -1     # (the kernel still runs: a solver's first step compiles it)
+        elif self._uncommitted:
+            np.copyto(lies_on, self._noted)
+        self._uncommitted = True
         supports(solver.model.scene, solver._q[k], support)
         count = carry(solver._q[k], solver._qd[k], solver._dv[k], state.q[k], lv.mass,
                       holds.kind, support, lies_on, up, self.thickness, self.friction, h)
@@ -284,10 +290,14 @@ class SelfContact:
             self._clean = np.empty((3,) + tuple(shape))
             self._clean_key = None
             self._patches = patch_cache(*shape)
+            self._noted, self._uncommitted = self._patches[-1].copy(), False
         return self._moved, self._before, self._support
 
     def committed(self, k, state, checked):
         """Remember where the next step starts (the step to ``state`` was accepted)."""
+        if self._uncommitted:
+            np.copyto(self._noted, self._patches[-1])
+            self._uncommitted = False
         self._key = (k, state.time)
         self._steps = 0 if checked else self._steps + 1
         if checked and self._start is not None:

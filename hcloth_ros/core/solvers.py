@@ -100,12 +100,11 @@ class Solver:
         none was is refused too, marked ``stretched``, so that
         :func:`~hcloth_ros.core.recovery.step_with_retries` takes it again in smaller steps
         (the 129 x 129 double fold's cloth falling back onto itself at up to 3 m/s, pushed
-        apart a pair at a time, left springs at 1.16; retried, 0.45: the README); None:
+        apart a pair at a time, left springs at 1.16; retried, 0.47: the README); None:
         off. Not retried: a start already stretched beyond it (two grippers pulling the
-        cloth taut), a step without self-contact pairs (a flood of far gripper poses took
-        15 steps a tick) and a step in which a grasp or a moving body moves the cloth
-        (:meth:`_driven`: its points would reach their target in the first of the smaller
-        steps, faster).
+        cloth taut) and a step without self-contact pairs (a flood of far gripper poses
+        took 15 steps a tick). Grasps and moving bodies move evenly over the smaller
+        steps (:meth:`Control.follow <hcloth_ros.core.control.Control.follow>`).
     :param builds: ``'serial'`` or ``'parallel'`` kernel builds on every level (or a kernel
         set with their names), or None: the parallel builds on levels large enough to
         split when numba runs several threads (see :mod:`hcloth_ros.core.kernels`).
@@ -448,7 +447,7 @@ class Solver:
                                 'far?): step refused, last good state kept',
                                 levels=tuple(levels))
         else:
-            report = self._check(levels, state, control)
+            report = self._check(levels, state)
         if report.ok:
             # the new state goes in by swapping arrays (no copy): State.q[k] and
             # State.qd[k] are other array objects after every step (see State)
@@ -456,32 +455,14 @@ class Solver:
                 state.q[k], self._q[k] = self._q[k], state.q[k]
                 state.qd[k], self._qd[k] = self._qd[k], state.qd[k]
             state.time += h
-            control.bodies.commit()
+            control.commit()
             if self.self_contact is not None:
                 self.self_contact.committed(levels[-1], state, checked is not None)
         report.seconds = time.perf_counter() - start
         report.extra.update(self._extra)
         return report
 
-    def _driven(self, control, state, k):
-        """
-        Whether a grasp or a moving body moves the cloth this step (by over 1 um).
-
-        Such a step is not retried for its strain: held points and bodies reach their
-        poses in the first of the smaller steps (core.recovery), 8 times as fast. A corner
-        sent 0.58 m while the fold demo's layers touched, retried, ran its points through
-        the layers at up to 280 m/s: 80,000 pairs, strain 14, ticks of 3-38 s, then refused;
-        not retried its strain relaxed from 5.2 to 1.0 in five ticks of 12-27 ms.
-        """
-        if control.bodies.moving():
-            return True
-        holds = control.holds(k)
-        if not holds.drive_index.size:
-            return False
-        now = state.q[k].reshape(3, -1)[:, holds.drive_index]
-        return bool(np.max(np.abs(holds.drive_target - now)) > 1e-6)
-
-    def _check(self, levels, state, control):
+    def _check(self, levels, state):
         """
         Refuse a non-finite step or a runaway strain, judged on the finest level alone.
 
@@ -505,16 +486,16 @@ class Solver:
             return StepReport(False, f'runaway strain {mx:.3g} > {self.blowup_strain:g} '
                               f'on level {k}: step refused, last good state kept',
                               max_strain=mx, levels=tuple(levels))
-        return self._stretched(levels, state, control, mx) or \
+        return self._stretched(levels, state, mx) or \
             StepReport(True, max_strain=mx, mean_strain=mean, levels=tuple(levels))
 
-    def _stretched(self, levels, state, control, mx):
+    def _stretched(self, levels, state, mx):
         """
         Return the refusal of a step that stretched the finest springs to ``mx``, or None.
 
         Refused (``stretched``): past ``retry_strain``, on a step in which self-contact
-        found pairs and no grasp or body moved the cloth (:meth:`_driven`), from a start
-        (``state``, not yet replaced) within it. The rest is computed only past it.
+        found pairs, from a start (``state``, not yet replaced) within it. The rest is
+        computed only past it.
         """
         if self.retry_strain is None or not mx > self.retry_strain:
             return None
@@ -522,8 +503,6 @@ class Solver:
                 or self._extra.get('self_contact_later_pairs')):
             return None
         k = levels[-1]
-        if self._driven(control, state, k):
-            return None
         start = self.kernels(k).strain_stats(state.q[k], state.qd[k],
                                              self.model.level(k).rest)[0]
         if start > self.retry_strain:
