@@ -70,7 +70,7 @@ from hcloth_ros import lifetime, memory, params
 from hcloth_ros.core import kernels_cached, warm_up
 from hcloth_ros.core.blas import limit_openblas_threads
 from hcloth_ros.core.control import PINNED
-from hcloth_ros.core.self_contact import thickness_warning
+from hcloth_ros.core.self_contact import solved_level_warning, thickness_warning
 from hcloth_ros.core.solvers import HierarchicalSolver
 from hcloth_ros.diagnostics import node_status
 from hcloth_ros.governor import finest_to_simulate, Governor
@@ -206,9 +206,16 @@ class ClothSimNode(Node):
 
     # --- start-up ----------------------------------------------------------------------
     def _warn_thick_self_contact(self):
-        """Log (and return) a warning if self-contact is thicker than the finest spacing."""
+        """
+        Log (and return) what self-contact's settings will not do well, or None.
+
+        A thickness not below the finest spacing; the finest level solved by multigrid
+        without strain limiting on it (``solved_level_warning``).
+        """
         contact = self.solver.self_contact
-        text = thickness_warning(self.model, contact.thickness) if contact else None
+        texts = [thickness_warning(self.model, contact.thickness),
+                 solved_level_warning(self.solver)] if contact else []
+        text = '; '.join(t for t in texts if t) or None
         if text:
             self.get_logger().warning(text)
         return text

@@ -78,6 +78,11 @@ PARAMS = [
           choices=('multigrid', 'hierarchical', 'explicit', 'approx', 'implicit')),
     Param('solver.accurate_level', 1, 'multigrid: the finest level solved by BDF2 and '
           'multigrid-CG; finer levels follow eq. 7 (clipped to the finest level)', 0, 9),
+    Param('solver.solved_strain_limit', 0.0, 'multigrid: strain limiting on the level it '
+          'solves (0.1 = 10 %; 0: off, its springs hold the cloth on their own). Where that '
+          'level is the finest and touches the ground or itself, contact stretches its '
+          'springs with nothing to pull them back (1.7 in the folded drop at 129 x 129)',
+          0.0, 9.99),
     Param('solver.integrator', 'bdf2', 'multigrid: bdf2 or backward_euler',
           choices=('bdf2', 'backward_euler')),
     Param('solver.newton_iterations', 3, 'multigrid: Newton iterations every step takes',
@@ -140,6 +145,12 @@ PARAMS = [
           'response a check (then one more moving points alone)', 1, 100),
     Param('self_contact.interval', 1, 'self-contact: check every n-th step (cheaper, but '
           'layers may pass through each other in between)', 1, 1000),
+    Param('self_contact.edges', 'auto', 'self-contact: the edges tested against edges '
+          'besides the free borders: creases (bent enough for an edge to pass under them '
+          'unseen), all (every bent edge: a cloth crumpled finer than its coarse levels '
+          'hooks edges a few rows apart; about 2.7 times the cost where layers touch) or '
+          'auto (all on a level the solver solves whole, creases on eq. 7 refinements)',
+          choices=('auto', 'creases', 'all')),
     Param('pinned_points', [0, 8], 'finest-level point ids that hold still (see README '
           'for the numbering); [-1] = none', -1, 2 ** 31 - 1, False),
 ]
@@ -363,12 +374,16 @@ def build_solver(model, values):
                    'max_newton_iterations': int(values['solver.max_newton_iterations']),
                    'newton_tolerance': float(values['solver.newton_tolerance']),
                    'newton_tolerance_steps': values['solver.newton_tolerance_steps']}
+        # (a recording started before the parameter existed replays without it, as it ran)
+        solved = float(values.get('solver.solved_strain_limit', 0.0))
+        options['solved_strain_limit'] = solved if solved > 0 else None
     thickness = float(values['self_contact.thickness'])
     if thickness > 0.0:
         options.update(thickness=thickness,
                        self_friction=float(values['self_contact.friction']),
                        self_contact_iterations=int(values['self_contact.iterations']),
-                       self_contact_interval=int(values['self_contact.interval']))
+                       self_contact_interval=int(values['self_contact.interval']),
+                       self_contact_edges=values.get('self_contact.edges', 'creases'))
     # (a recording started before the parameter existed replays without it, as it ran)
     retry = float(values.get('solver.retry_strain', 0.0))
     return make_solver(name, model, external=values['solver.external'], strain_limit=limit,

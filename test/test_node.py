@@ -509,5 +509,15 @@ def test_a_self_contact_thicker_than_the_finest_spacing_is_warned_of_at_start():
             Parameter('self_contact.thickness', value=0.004)])
         assert sim._warn_thick_self_contact() is None        # 15.6 mm a spacing
         sim.destroy_node()
+        solved = [Parameter('self_contact.thickness', value=0.004),
+                  Parameter('solver.accurate_level', value=3)]
+        sim = ClothSimNode(context=context, parameter_overrides=solved)
+        assert 'set solver.solved_strain_limit' in sim._warn_thick_self_contact()
+        sim.destroy_node()
+        sim = ClothSimNode(context=context, parameter_overrides=solved + [
+            Parameter('solver.solved_strain_limit', value=0.1)])
+        assert sim._warn_thick_self_contact() is None
+        assert sim.solver.solved_strain_limit == 0.1 and sim.solver.self_contact.edges == 'auto'
+        sim.destroy_node()
     finally:
         rclpy.shutdown(context=context)

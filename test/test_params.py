@@ -127,6 +127,25 @@ def test_retry_strain_parameter_reaches_the_solver_and_old_recordings_go_without
         make_solver('multigrid', model, retry_strain=10.0)
 
 
+def test_edges_and_solved_strain_limit_reach_the_solver_and_old_recordings_go_without():
+    """``self_contact.edges`` (auto) and ``solver.solved_strain_limit`` (0: off)."""
+    values = params.resolve({'cloth.resolution': [5, 5], 'cloth.levels': 2,
+                             'self_contact.thickness': 0.004})
+    model = params.build_model(values)
+    solver = params.build_solver(model, values)
+    assert solver.self_contact.edges == 'auto' and solver.solved_strain_limit is None
+    solver = params.build_solver(model, dict(values, **{'self_contact.edges': 'all',
+                                                        'solver.solved_strain_limit': 0.1}))
+    assert solver.self_contact.edges == 'all' and solver.solved_strain_limit == 0.1
+    # a recording started before them replays as it ran: creases only, no solved limit
+    older = {name: value for name, value in values.items()
+             if name not in ('self_contact.edges', 'solver.solved_strain_limit')}
+    solver = params.build_solver(model, older)
+    assert solver.self_contact.edges == 'creases' and solver.solved_strain_limit is None
+    with pytest.raises(ValueError, match='self_contact.edges'):
+        params.resolve({'self_contact.edges': 'some'})
+
+
 def test_command_line_assignments_are_yaml_values():
     assert params.assignments(['solver.dt=0.01', 'cloth.levels=5', 'a=null', 'b=[1, 2]',
                                'c=x=y']) == {'solver.dt': 0.01, 'cloth.levels': 5,

@@ -246,6 +246,9 @@ class MultigridSolver(HierarchicalSolver):
         """Return the level the integrator solves: the accurate one, or the finest."""
         return min(self.accurate_level, self.finest_level)
 
+    def solves(self, k):
+        return k == self.solved_level()
+
     def _hierarchy(self, top):
         if top not in self._hierarchies:
             self._hierarchies[top] = _Hierarchy(self.model, top)

@@ -13,6 +13,8 @@ import numpy as np
 
 # Rounds of self-contact and strain limiting a check runs at most (see SelfContact.apply).
 ROUNDS = 3
+# Which edges are tested against edges (see SelfContact)
+EDGES = ('auto', 'creases', 'all')
 
 
 def thickness_warning(model, thickness):
@@ -36,6 +38,25 @@ def thickness_warning(model, thickness):
             f'{model.height:g} m): self-contact misses folds tighter than a few '
             f'spacings; keep the thickness under about half the spacing '
             f'({0.5 * spacing:.2g} m), or use fewer levels or a coarser cloth.resolution')
+
+
+def solved_level_warning(solver):
+    """
+    Return why the solver's finest level will stretch in contact, or None.
+
+    The multigrid solver solving the finest simulated level itself, with self-contact
+    and no ``solved_strain_limit``: the solve holds the springs, but the contact passes
+    after it move points with nothing to pull their neighbours after them (the folded
+    drop at 129 x 129, ``accurate_level`` 4: 1.7, against 0.14 with 0.1).
+    """
+    finest = solver.levels()[-1]
+    if solver.self_contact is None or not hasattr(solver, 'solved_strain_limit') or \
+            solver.solved_strain_limit is not None or not solver.solves(finest):
+        return None
+    return (f'multigrid solves the finest level ({finest}, solver.accurate_level '
+            f'{solver.accurate_level}) with self-contact and no solver.solved_strain_limit: '
+            f'contact will stretch its springs with nothing pulling them back (1.7 in the '
+            f'129 x 129 folded drop); set solver.solved_strain_limit (0.1: 0.14 there)')
 
 
 def _up(model):
@@ -78,9 +99,16 @@ class SelfContact:
         pass through itself; the check then runs from the positions of the last one, so
         a point that ended up on the other side of a triangle is brought back (a crossing
         that is undone within the interval goes unseen).
+    :param edges: which edges besides the free borders are tested against edges:
+        ``'creases'``, those bent enough for an edge to pass under them unseen by the
+        point tests; ``'all'``, every bent edge (a cloth crumpled in compression hooks
+        edges a few rows apart that bend less: the kernel's ``all_edges``), about 2.7
+        times the cost where layers touch; ``'auto'``, all on a level the solver solves
+        itself (:meth:`Solver.solves`: multigrid's accurate level, which let the folded
+        drop crumple so), creases elsewhere.
     """
 
-    def __init__(self, thickness, friction=0.3, iterations=8, interval=1):
+    def __init__(self, thickness, friction=0.3, iterations=8, interval=1, edges='auto'):
         if not (np.isfinite(thickness) and 0.0 < thickness <= 0.1):
             raise ValueError(f'thickness must be in (0, 0.1] m or None, got {thickness}')
         if not (np.isfinite(friction) and 0.0 <= friction <= 10.0):
@@ -89,6 +117,9 @@ class SelfContact:
                                   ('self_contact_interval', interval, 1000)):
             if not 1 <= int(value) <= high:
                 raise ValueError(f'{name} must be in 1..{high}, got {value}')
+        if edges not in EDGES:
+            raise ValueError(f'self_contact_edges must be one of {EDGES}, got {edges!r}')
+        self.edges = edges
         self.thickness = float(thickness)
         self.friction = float(friction)
         self.iterations = int(iterations)
@@ -168,6 +199,7 @@ class SelfContact:
                 return 0
         step_start = state.q[k] if self._start is None else self._start
         start, reuse = self._path_start(k, state, step_start, moved is not None)
+        all_edges = self.edges == 'all' or (self.edges == 'auto' and solver.solves(k))
         for attempt in range(ROUNDS):
             np.copyto(before, solver._q[k])
             supports(solver.model.scene, solver._q[k], support)
@@ -175,7 +207,7 @@ class SelfContact:
                 solver._q[k], solver._qd[k], solver._dv[k], step_start, start, lv.mass,
                 holds.kind, mask, support, self.thickness, self.friction, self.iterations,
                 span, max(solver.model.width, solver.model.height), up, *self._patches,
-                reuse)
+                reuse, all_edges)
             if found < 0:
                 solver._extra['self_contact_refused'] = True
                 return None

@@ -115,6 +115,8 @@ class Solver:
     :param self_contact_iterations: most rounds of detection and response a check (then one
         more that moves points alone).
     :param self_contact_interval: check every n-th step.
+    :param self_contact_edges: which edges are tested against edges: ``'auto'``,
+        ``'creases'`` or ``'all'`` (:class:`~hcloth_ros.core.self_contact.SelfContact`).
     :param contact_rounds, contact_sweeps: on a step where a refinement level or the
         finest simulated level touched an obstacle, most rounds of strain limiting (this
         many sweeps, every point free) and contact on it, the coarser levels taking the
@@ -140,7 +142,8 @@ class Solver:
     def __init__(self, model, external='exact', strain_limit=0.1, strain_iterations=100,
                  strain_refine_iterations=4, strain_tolerance=0.005, blowup_strain=10.0,
                  retry_strain=None, builds=None, thickness=None, self_friction=0.3,
-                 self_contact_iterations=8, self_contact_interval=1, contact_rounds=16,
+                 self_contact_iterations=8, self_contact_interval=1,
+                 self_contact_edges='auto', contact_rounds=16,
                  contact_sweeps=None, contact_strain='tangent',
                  contact_relaxation=TANGENT_RELAXATION, contact_tethers=True):
         if external not in EXTERNAL_MODES:
@@ -169,7 +172,8 @@ class Solver:
             raise ValueError(f'retry_strain must be in (0, blowup_strain {blowup_strain:g}) '
                              f'or None, got {retry_strain}')
         self.self_contact = None if thickness is None else SelfContact(
-            thickness, self_friction, self_contact_iterations, self_contact_interval)
+            thickness, self_friction, self_contact_iterations, self_contact_interval,
+            self_contact_edges)
         if isinstance(builds, str) and builds not in ('serial', 'parallel'):
             raise ValueError(f"builds must be 'serial', 'parallel' or None, got {builds!r}")
         self._builds = {'serial': kernels.SERIAL, 'parallel': kernels.PARALLEL}.get(
@@ -393,6 +397,15 @@ class Solver:
                                             holds.kind, False, self._bodies, margin, h,
                                             self._dt, planes, friction)
 
+    def solves(self, k):
+        """
+        Whether level k is solved whole, not refined from a coarser one by eq. 7.
+
+        A refined level follows its coarser level's shape; a solved one can crumple
+        finer than any coarser level (self-contact's ``edges`` 'auto' tests all its edges).
+        """
+        return False
+
     def _inject_down(self, levels):
         """Give every coarser level the finest simulated level's state where they share points."""
         kit = self.kernels(levels[-1])
@@ -522,6 +535,9 @@ class _SingleLevel(Solver):
     def levels(self):
         return [self.level]
 
+    def solves(self, k):
+        return k == self.level
+
 
 class ExplicitSolver(_SingleLevel):
     """Symplectic Euler on one level."""
@@ -582,6 +598,9 @@ class HierarchicalSolver(Solver):
 
     def levels(self):
         return list(range(self._finest + 1))
+
+    def solves(self, k):
+        return k == 0           # eq. 6; the finer levels are eq. 7 refinements
 
     def set_finest_level(self, k, state, control):
         """
