@@ -2,12 +2,15 @@
 The node's grippers: newest command per gripper, applied to the cloth at a tick.
 
 ROS-free (plain numbers in, log lines out), so it is tested without a graph. A flood of
-commands keeps only the newest of each gripper; nothing is queued.
+commands keeps only the newest of each gripper; nothing is queued. A grasping gripper
+moves towards its newest pose at most ``max_step`` a tick (the node's
+``grasp_max_speed``): a pose far away is reached over several ticks, as a robot's
+gripper would travel, instead of the grasped cloth being torn there in one step.
 """
 
 from dataclasses import dataclass
 
-from hcloth_ros.core.poses import pose_fields, quaternion_to_matrix
+from hcloth_ros.core.poses import part_way, pose_fields, quaternion_to_matrix
 import numpy as np
 
 
@@ -21,6 +24,8 @@ class Gripper:
     pose_pending: bool = False
     close_request: bool = None      # None: nothing new; True: grasp; False: release
     grasping: bool = False
+    sent: tuple = None              # the grasp frame's pose last sent to the cloth
+    travelling: bool = False        # on its way to a pose farther than a tick's travel
 
 
 def checked_pose(who, frame_id, expected_frame, position, orientation):
@@ -96,13 +101,14 @@ class GripperBank:
         """Ask for a grasp (``closed`` true) or a release at the next tick."""
         self.grippers[name].close_request = bool(closed)
 
-    def apply(self, apply, points_near):
+    def apply(self, apply, points_near, max_step=None):
         """
         Turn the newest requests into simulation commands before a step.
 
         ``apply``: takes the commands (a :class:`~hcloth_ros.simulation.Simulation`'s);
-        ``points_near(position)``: the point ids a gripper closing there takes. Returns
-        ``(severity, message)`` lines to log.
+        ``points_near(position)``: the point ids a gripper closing there takes;
+        ``max_step``: the farthest a grasp frame's origin moves in one call (m; None: no
+        limit), turning in proportion. Returns ``(severity, message)`` lines to log.
         """
         log = []
         for g in self.grippers.values():
@@ -114,19 +120,37 @@ class GripperBank:
                 apply(['grasp', g.name, np.asarray(ids).tolist(),
                        *pose_fields(g.rotation, g.translation)])
                 g.grasping, g.pose_pending = True, False
+                g.sent, g.travelling = (g.rotation, g.translation), False
                 log.append(('info', f'gripper {g.name}: grasped {len(ids)} points'))
             elif request is False and g.grasping:
                 apply(['release', g.name])
                 g.grasping = False
             if g.grasping and g.pose_pending:
-                apply(['move', g.name, *pose_fields(g.rotation, g.translation)])
-                g.pose_pending = False
+                log += self._travel(g, apply, max_step)
+        return log
+
+    @staticmethod
+    def _travel(g, apply, max_step):
+        """Send gripper ``g`` towards its newest pose, at most ``max_step``; return log lines."""
+        target = (g.rotation, g.translation)
+        distance = float(np.linalg.norm(g.translation - g.sent[1]))
+        log = []
+        if max_step is not None and distance > max_step:
+            if not g.travelling:
+                log.append(('warning', f'gripper {g.name}: pose {distance:.3g} m away, more '
+                            f'than {max_step:.3g} m a tick (grasp_max_speed): reached over '
+                            f'{int(np.ceil(distance / max_step))} ticks'))
+            target = part_way(g.sent, target, max_step / distance)
+        g.travelling = target[1] is not g.translation
+        apply(['move', g.name, *pose_fields(*target)])
+        g.sent, g.pose_pending = target, g.travelling
         return log
 
     def forget_grasps(self):
         """After a reset: nothing held, no command pending (poses are kept)."""
         for g in self.grippers.values():
             g.grasping, g.close_request, g.pose_pending = False, None, False
+            g.travelling = False
 
 
 def points_within(points, position, radius):

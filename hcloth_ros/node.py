@@ -663,10 +663,16 @@ class ClothSimNode(Node):
         pts = self.state.points_by_id(self.model, self.solver.levels()[-1])
         return points_within(pts, position, self.get_parameter('grasp_radius').value)
 
+    def _max_grasp_step(self):
+        """How far a grasping gripper may travel this tick (m), or None: no limit."""
+        speed = self.get_parameter('grasp_max_speed').value
+        return speed * self.sim.dt * self.sim.substeps if speed > 0 else None
+
     def _tick(self):
         t0 = time.perf_counter()
         self._set_levels()
-        for severity, text in self.grippers.apply(self.sim.apply, self._points_near):
+        for severity, text in self.grippers.apply(self.sim.apply, self._points_near,
+                                                  self._max_grasp_step()):
             self._log(severity, text)
         moved = self.obstacles.apply(self.sim.apply)
         commands = self.sim.take_commands()

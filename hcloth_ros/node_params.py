@@ -34,6 +34,10 @@ NODE_PARAMS = [
           'gave the lowest tail latency with subscribers on the same 2 cores', 1, 256),
     Param('grasp_radius', 0.03, 'a closing gripper takes the points this close (m)',
           0.0, 1.0, False),
+    Param('grasp_max_speed', 5.0, 'a grasping gripper travels to its newest pose at most '
+          'this fast (m/s of simulated time), so a pose far away is reached over several '
+          'ticks instead of tearing the cloth there in one step; 0: no limit', 0.0, 1000.0,
+          False),
     Param('scene.moving_obstacles', [''], 'moving obstacles, one string each: "<name> '
           '<shape> <sizes> [friction]" with shape box (3 half extents), sphere (radius) or '
           'capsule (radius, half length along its z), in m; each follows '

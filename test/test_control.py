@@ -441,6 +441,30 @@ def test_recapture_keeps_a_restarted_level_in_place_and_rigid():
     assert np.allclose(after, before, atol=1e-12)
 
 
+def test_recapture_with_a_move_pending_takes_the_frame_where_the_state_is():
+    """
+    A level restarted while the grasp's next pose is set: its points move with the frame.
+
+    Recaptured against the frame's committed pose (where the state is), the step carries
+    them by the pending rigid motion (5 cm up, a quarter turn about z), not offset by it.
+    """
+    model = ClothBuilder(resolution=(3, 3), level_count=3).finalize()
+    state, control = State.at_rest(model), Control(model)
+    solver = make_solver('hierarchical', model, finest_level=1)
+    inserted = next(i for i in range(model.point_count) if model.intro_level[i] == 2)
+    frame = state.position_of(model, inserted, 2) + [0.1, 0.0, 0.0]
+    control.grasp('g', [inserted], state, np.eye(3), frame)
+    assert solver.step(state, control, 1 / 60).ok
+    turn, lift = rotation((0, 0, 1), math.pi / 2), frame + [0.0, 0.0, 0.05]
+    control.move_grasp('g', turn, lift)
+    solver.set_finest_level(2, state, control)      # prolonged, recaptured
+    grid = model.level(2).id_to_grid[inserted]
+    before = state.q[2].reshape(3, -1)[:, grid].copy()
+    assert solver.step(state, control, 1 / 60).ok
+    expected = turn @ (before - frame) + lift
+    np.testing.assert_allclose(state.q[2].reshape(3, -1)[:, grid], expected, atol=1e-12)
+
+
 def test_grasp_holds_the_footprint_of_inserted_points_on_coarser_levels():
     model = ClothBuilder(resolution=(3, 3), level_count=3).finalize()
     inserted = next(i for i in range(model.point_count) if model.intro_level[i] == 2)

@@ -144,6 +144,52 @@ def test_grasp_follows_the_newest_pose_and_releases(cloth):
     assert not bank['left'].grasping and control.grasp_names == []
 
 
+def test_a_pose_far_away_is_travelled_to_at_most_max_step_a_tick(cloth):
+    """
+    ``grasp_max_speed``: 0.58 m and a quarter turn away at 0.1 m a tick take six ticks.
+
+    Each tick's frame is 0.1 m further along the straight line, turned in proportion
+    (slerp), the last one exactly the pose asked; one warning says how many ticks. A pose
+    within a tick's travel goes at once; a new pose while travelling is headed for from
+    where the frame is.
+    """
+    model, state, control = cloth
+    bank = GripperBank(['left'])
+    corner = state.points_by_id(model, 2)[0]
+    bank.set_pose('left', 'world', 'world', corner, (0, 0, 0, 1))
+    bank.request_close('left', True)
+    apply = Simulation(model, None, state, control, 0.01, 1).apply
+    bank.apply(apply, near(model, state), 0.1)
+    far = corner + [0.0, -0.58, 0.0]
+    half = np.sqrt(0.5)
+    bank.set_pose('left', 'world', 'world', far, (0, 0, half, half))
+    logs, frames = [], []
+    for _ in range(7):
+        logs += bank.apply(apply, near(model, state), 0.1)
+        g = control._grasps['left']
+        frames.append((g.rotation.copy(), g.translation.copy()))
+    assert logs == [('warning', 'gripper left: pose 0.58 m away, more than 0.1 m a tick '
+                                '(grasp_max_speed): reached over 6 ticks')]
+    for i, (rotation, translation) in enumerate(frames[:5]):
+        np.testing.assert_allclose(translation, corner + [0.0, -0.1 * (i + 1), 0.0],
+                                   atol=1e-12)
+        angle = np.arctan2(rotation[1, 0], rotation[0, 0])
+        assert angle == pytest.approx(np.pi / 2 * 0.1 * (i + 1) / 0.58, abs=1e-9)
+    assert frames[5][1].tolist() == far.tolist() and frames[6][1].tolist() == far.tolist()
+    assert not bank['left'].travelling and not bank['left'].pose_pending
+    bank.set_pose('left', 'world', 'world', far + [0.05, 0.0, 0.0], (0, 0, half, half))
+    assert bank.apply(apply, near(model, state), 0.1) == []
+    assert control._grasps['left'].translation.tolist() == (far + [0.05, 0, 0]).tolist()
+    bank.set_pose('left', 'world', 'world', corner, (0, 0, 0, 1))     # on its way back...
+    assert len(bank.apply(apply, near(model, state), 0.1)) == 1
+    there = control._grasps['left'].translation.copy()
+    bank.set_pose('left', 'world', 'world', far, (0, 0, half, half))   # ...sent back again
+    bank.apply(apply, near(model, state), 0.1)
+    moved = control._grasps['left'].translation - there
+    np.testing.assert_allclose(moved, 0.1 * (far - there) / np.linalg.norm(far - there),
+                               atol=1e-12)
+
+
 def test_forget_grasps_keeps_poses_and_drops_commands():
     bank = GripperBank(['left'])
     bank.set_pose('left', 'world', 'world', (0, 0, 1), (0, 0, 0, 1))

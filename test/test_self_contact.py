@@ -252,7 +252,7 @@ def _run_kernel(lv, start, end, qd, friction):
                                   np.zeros(lv.shape, dtype=np.int8),
                                   np.ones(lv.shape, dtype=np.bool_), _no_support(lv),
                                   THICKNESS, friction, 4, H, 10.0, UP,
-                                  *patch_cache(*lv.shape), BOXES_NEW)
+                                  *patch_cache(*lv.shape), BOXES_NEW, False)
     return dv, result
 
 
@@ -328,7 +328,7 @@ def test_kernel_leaves_a_sheet_with_nothing_near_bit_for_bit():
                                           np.zeros(lv.shape, dtype=np.int8),
                                           np.ones(lv.shape, dtype=np.bool_), _no_support(lv),
                                           THICKNESS, 0.3, 4, H, 10.0, UP,
-                                          *patch_cache(*lv.shape), BOXES_NEW)
+                                          *patch_cache(*lv.shape), BOXES_NEW, False)
     assert pairs == 0
     assert np.array_equal(end, before) and not qd.any()
 
@@ -553,7 +553,7 @@ def test_a_call_told_which_points_moved_finds_what_a_whole_call_finds():
     hold, support = np.zeros(lv.shape, dtype=np.int8), _no_support(lv)
     every = np.ones(lv.shape, dtype=np.bool_)
     kernels.self_contact(end, qd, dv, start, start, lv.mass, hold, every, support,
-                         THICKNESS, 0.0, 4, H, 10.0, UP, *cache, BOXES_NEW)
+                         THICKNESS, 0.0, 4, H, 10.0, UP, *cache, BOXES_NEW, False)
     assert violations(start, end, THICKNESS) == (0, 0)
     moved = np.zeros(lv.shape, dtype=np.bool_)
     upper, _ = _flat_rows(top)
@@ -562,10 +562,10 @@ def test_a_call_told_which_points_moved_finds_what_a_whole_call_finds():
     end[2, moved] -= 0.8 * THICKNESS
     whole = [a.copy() for a in (end, qd, dv)]
     told = kernels.self_contact(end, qd, dv, start, start, lv.mass, hold, moved, support,
-                                THICKNESS, 0.0, 4, H, 10.0, UP, *cache, BOXES_KEPT)
+                                THICKNESS, 0.0, 4, H, 10.0, UP, *cache, BOXES_KEPT, False)
     every_pair = kernels.self_contact(*whole, start, start, lv.mass, hold, every, support,
                                       THICKNESS, 0.0, 4, H, 10.0, UP, *patch_cache(*lv.shape),
-                                      BOXES_NEW)
+                                      BOXES_NEW, False)
     assert told[0] >= moved.sum() and told == every_pair
     for mine, theirs in zip((end, qd, dv), whole):
         assert np.array_equal(mine, theirs)
@@ -635,10 +635,10 @@ def test_a_later_call_takes_the_sub_intervals_of_both_ends_longest_edges(tilt, s
     every = np.ones(lv.shape, dtype=np.bool_)
     first = kernels.self_contact(start.copy(), np.zeros_like(end), np.zeros_like(end), start,
                                  start, lv.mass, hold, every, support, THICKNESS, 0.0, 4, H,
-                                 10.0, UP, *cache, BOXES_NEW)
+                                 10.0, UP, *cache, BOXES_NEW, False)
     later = kernels.self_contact(end.copy(), np.zeros_like(end), np.zeros_like(end), start,
                                  start, lv.mass, hold, every, support, THICKNESS, 0.0, 4, H,
-                                 10.0, UP, *cache, BOXES_KEPT)
+                                 10.0, UP, *cache, BOXES_KEPT, False)
     assert first[1] == MIN_SUBSTEPS and later[1] == substeps(edge)
 
 
@@ -1278,7 +1278,7 @@ def test_the_double_fold_at_129_with_the_nodes_retries_keeps_its_springs():
     section's known limits: 2.08, then 8.33 with every step refused, then 2.19 and 1.16;
     ``tools/double_fold.py --size 129``). After the release the lifted cloth falls back onto
     itself at up to 3 m/s; retried in smaller steps (``retry_strain`` 0.5) the largest
-    strain is 0.47. Asserted: every step goes through, ends within ``retry_strain`` unless
+    strain is 0.49. Asserted: every step goes through, ends within ``retry_strain`` unless
     it started beyond it or took the 8 steps, the largest strain stays under 1 (ten times
     the strain limit), and no edge goes through a triangle (every third step after the
     landing). Some step is retried: the scene still tests the retries.
@@ -1377,7 +1377,7 @@ def test_a_stack_of_layers_falling_onto_the_one_on_the_ground_comes_to_rest():
     kernels.self_contact(end, qd, dv, start, start, lv.mass,
                          np.zeros(lv.shape, dtype=np.int8),
                          np.ones(lv.shape, dtype=np.bool_), support, THICKNESS, 0.3, 8, H,
-                         10.0, UP, *patch_cache(*lv.shape), BOXES_NEW)
+                         10.0, UP, *patch_cache(*lv.shape), BOXES_NEW, False)
     assert violations(start, end, THICKNESS) == (0, 0)
     bottom = layer == 0
     assert np.array_equal(end[:, bottom], start[:, bottom])
@@ -1686,6 +1686,43 @@ def test_a_refused_try_leaves_no_notes_of_what_lies_on_what(monkeypatch):
     monkeypatch.setattr(module, 'carry', spy)
     assert solver.step(state, control, H).ok
     assert np.array_equal(seen[0], committed)
+
+
+def test_a_retry_refused_half_way_leaves_the_notes_as_they_were(monkeypatch):
+    """
+    A retry whose first half step went through and whose second was refused is undone whole.
+
+    The settled fold of the test above; the step is refused (call 1), retried as two
+    halves, the second refused (call 3: the first had committed, moving the step count,
+    the check's key and the notes on), then as four quarters. Each try starts ``carry``
+    from the notes of the last step committed before it: the first quarter too, not from
+    none (the restored state's time no longer matched the half step's key) nor from the
+    half step's.
+    """
+    from hcloth_ros.core import self_contact as module
+    model = folded_model(levels=3)
+    state, control = folded_state(model, 0.05), Control(model)
+    solver = make_solver('hierarchical', model, thickness=THICKNESS)
+    for _ in range(30):
+        assert solver.step(state, control, H).ok
+    committed = solver.self_contact._patches[-1].copy()
+    assert (committed >= 0).sum() > 200
+    seen, carry, step, calls = [], module.carry, solver.step, [0]
+
+    def spy(*args):
+        seen.append(args[7].copy())
+        return carry(*args)
+
+    def refusing(state, control, dt):
+        calls[0] += 1
+        solver.blowup_strain = 1e-12 if calls[0] in (1, 3) else 10.0
+        return step(state, control, dt)
+    monkeypatch.setattr(module, 'carry', spy)
+    solver.step = refusing
+    report, taken = step_with_retries(solver, state, control, H)
+    assert report.ok and taken == 4 and calls[0] == 7
+    for call in (0, 1, 3):          # the step, the first half, the first quarter
+        assert np.array_equal(seen[call], committed), call
 
 
 def test_a_folded_cloth_at_rest_costs_no_pairs_once_carried():

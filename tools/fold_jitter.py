@@ -30,10 +30,12 @@ from hcloth_ros import params
 from hcloth_ros.demo import fold_client
 from hcloth_ros.demo.fold_metrics import describe, fold_metrics
 from hcloth_ros.grippers import GripperBank, points_within
+from hcloth_ros.node_params import SPEC_BY_NAME
 from hcloth_ros.simulation import Simulation
 import numpy as np
 
 RADIUS = 0.03       # m: the fold scene's grasp_radius
+MAX_SPEED = SPEC_BY_NAME['grasp_max_speed'].default     # m/s, as the node
 NAMES = ('left', 'right')
 
 
@@ -90,7 +92,8 @@ def run(seed, turn=True, overrides=None, shed=None, restore=None):
             else:
                 bank.request_close(item[2], item[3])
         bank.apply(sim.apply, lambda p: points_within(
-            sim.state.points_by_id(sim.model, sim.solver.levels()[-1]), p, RADIUS))
+            sim.state.points_by_id(sim.model, sim.solver.levels()[-1]), p, RADIUS),
+            MAX_SPEED * sim.dt * sim.substeps)
         sim.advance()
     finest = sim.solver.levels()[-1]
     return before[finest], sim.state.points(finest).copy()

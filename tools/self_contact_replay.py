@@ -82,7 +82,8 @@ def per_step(calls, seconds, which):
     """Sum ``seconds`` by step over the calls ``which`` selects (first or later calls)."""
     totals = {}
     for (step, arguments), t in zip(calls, seconds):
-        later = arguments[-1]       # the kernel's reuse flag: set on a step's later calls
+        later = arguments[-2]       # the kernel's reuse flag (before all_edges): set on a
+        # step's later calls
         if which is None or which == later:
             totals[step] = totals.get(step, 0.0) + t
     return np.array(list(totals.values()))

@@ -130,8 +130,8 @@ class Control:
         arr = self._check_ids(ids)
         if arr.size == 0:
             raise ValueError(f'grasp {name!r} needs at least one point')
-        r = check_rotation(rotation)
-        p = check_vector(translation, 'translation')
+        r = check_rotation(rotation).copy()      # the caller may reuse its arrays
+        p = check_vector(translation, 'translation').copy()
         grid_index, local = [], []
         for k in range(self.model.level_count):
             reps = np.unique(sorted(set().union(*(self.model.footprint(i, k)
@@ -153,8 +153,8 @@ class Control:
         """
         if name not in self._grasps:
             raise KeyError(f'no grasp named {name!r} (have {self.grasp_names})')
-        rotation = check_rotation(rotation)
-        translation = check_vector(translation, 'translation')
+        rotation = check_rotation(rotation).copy()
+        translation = check_vector(translation, 'translation').copy()
         g = self._grasps[name]
         g.rotation, g.translation = rotation, translation
 
@@ -167,8 +167,11 @@ class Control:
         points where they are and rigid with the frame from now on, instead of jumping.
         """
         for g in self._grasps.values():
+            # the state is where the last committed step left the frame, not where the
+            # next step takes it
             x = state.q[k].reshape(3, -1)[:, g.grid_index[k]]
-            g.local[k] = np.ascontiguousarray(g.rotation.T @ (x - g.translation[:, None]))
+            g.local[k] = np.ascontiguousarray(
+                g.start_rotation.T @ (x - g.start_translation[:, None]))
 
     def release(self, name):
         if self._grasps.pop(name, None) is not None:

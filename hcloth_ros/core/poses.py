@@ -85,9 +85,10 @@ def part_way(start, end, s):
     Return the pose a fraction ``s`` of the way from ``start`` to ``end``.
 
     Each pose is ``(rotation, translation)``; the translation moves in a straight line
-    and the rotation by :func:`slerp`. ``s`` = 1 returns ``end``'s arrays themselves.
+    and the rotation by :func:`slerp`. ``s`` = 1, or a pose that does not change,
+    returns ``end``'s arrays themselves (a still grasp's targets stay bit for bit).
     """
-    if s >= 1.0:
+    if s >= 1.0 or (np.array_equal(start[0], end[0]) and np.array_equal(start[1], end[1])):
         return end
     return slerp(start[0], end[0], s), start[1] + s * (end[1] - start[1])
 

@@ -39,15 +39,17 @@ def step_with_retries(solver, state, control, dt, splits=SPLITS):
     state, grasps and moving bodies are where they were; the report is the first refusal,
     or the last one if the first was only ``stretched``). A report after retries holds why
     the first try was refused in ``extra['refused']`` (its reason without "step refused,
-    last good state kept"). Step i of n asks grasps and bodies to be i / n of their way to
-    the poses the step asked (``control.follow``). The last n takes its steps however far
-    they stretch the springs (below ``blowup_strain``): a strain that smaller steps do not
-    bring under ``retry_strain`` is kept rather than the cloth stopped.
+    last good state kept"). A try whose smaller steps went through in part is undone whole:
+    state, grasps, bodies and the solver's memory (``solver.checkpoint``). Step i of n
+    asks grasps and bodies to be i / n of their way to the poses the step asked
+    (``control.follow``). The last n takes its steps however far they stretch the springs
+    (below ``blowup_strain``): a strain that smaller steps do not bring under
+    ``retry_strain`` is kept rather than the cloth stopped.
     """
     report = solver.step(state, control, dt)
     if report.ok:
         return report, 1
-    refused, start, plan = report, state.copy(), control.plan()
+    refused, start, plan, kept = report, state.copy(), control.plan(), solver.checkpoint()
     for n in splits:
         with _stretch_allowed(solver, n == splits[-1]):
             for i in range(1, n + 1):
@@ -56,6 +58,7 @@ def step_with_retries(solver, state, control, dt, splits=SPLITS):
                 if not report.ok:
                     state.assign(start)
                     control.rewind(plan)
+                    solver.restore(kept)
                     break
             else:
                 report.extra['refused'] = refused.reason.split(': step refused')[0]

@@ -325,6 +325,25 @@ class SelfContact:
             self._noted, self._uncommitted = self._patches[-1].copy(), False
         return self._moved, self._before, self._support
 
+    def checkpoint(self):
+        """
+        Return what a committed step leaves here, for :meth:`restore` after undoing steps.
+
+        A retry's smaller steps commit one by one; when a later one is refused the state
+        goes back to the retry's start, and so must the step count, the last check's
+        positions and the notes of what lies on what.
+        """
+        return (self._key, self._steps, None if self._start is None else self._start.copy(),
+                None if self._noted is None else self._noted.copy())
+
+    def restore(self, checkpoint):
+        """Go back to a :meth:`checkpoint` (the state went back to where it was taken)."""
+        self._key, self._steps, start, noted = checkpoint
+        self._start = None if start is None else start.copy()
+        if noted is not None and self._noted is not None and noted.shape == self._noted.shape:
+            np.copyto(self._noted, noted)
+            self._uncommitted = True    # the next step starts from these notes
+
     def committed(self, k, state, checked):
         """Remember where the next step starts (the step to ``state`` was accepted)."""
         if self._uncommitted:

@@ -100,7 +100,7 @@ class Solver:
         none was is refused too, marked ``stretched``, so that
         :func:`~hcloth_ros.core.recovery.step_with_retries` takes it again in smaller steps
         (the 129 x 129 double fold's cloth falling back onto itself at up to 3 m/s, pushed
-        apart a pair at a time, left springs at 1.16; retried, 0.47: the README); None:
+        apart a pair at a time, left springs at 1.16; retried, 0.49: the README); None:
         off. Not retried: a start already stretched beyond it (two grippers pulling the
         cloth taut) and a step without self-contact pairs (a flood of far gripper poses
         took 15 steps a tick). Grasps and moving bodies move evenly over the smaller
@@ -396,6 +396,15 @@ class Solver:
         return self.kernels(k).body_contact(self._q[k], self._qd[k], self._dv[k], state.q[k],
                                             holds.kind, False, self._bodies, margin, h,
                                             self._dt, planes, friction)
+
+    def checkpoint(self):
+        """Return what :meth:`restore` needs to undo committed steps (self-contact's memory)."""
+        return None if self.self_contact is None else self.self_contact.checkpoint()
+
+    def restore(self, checkpoint):
+        """Undo the steps committed since ``checkpoint``; the caller restores the state."""
+        if self.self_contact is not None and checkpoint is not None:
+            self.self_contact.restore(checkpoint)
 
     def solves(self, k):
         """
