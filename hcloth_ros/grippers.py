@@ -49,6 +49,26 @@ def checked_pose(who, frame_id, expected_frame, position, orientation):
     return (rotation, translation), None
 
 
+def travel(sent, target, max_step):
+    """
+    Return ``(pose, distance)``: where a frame at ``sent`` goes this tick towards ``target``.
+
+    Poses are ``(rotation, translation)``. At most ``max_step`` (m; None: no limit) along
+    the straight line, turning in proportion; ``target`` itself when it is that near (so
+    ``pose is target`` says it arrived). ``distance``: from ``sent`` to ``target``.
+    """
+    distance = float(np.linalg.norm(target[1] - sent[1]))
+    if max_step is None or distance <= max_step:
+        return target, distance
+    return part_way(sent, target, max_step / distance), distance
+
+
+def far_warning(who, distance, max_step, parameter):
+    """Return the log line of a pose farther than a tick's travel."""
+    return ('warning', f'{who}: pose {distance:.3g} m away, more than {max_step:.3g} m a '
+            f'tick ({parameter}): reached over {int(np.ceil(distance / max_step))} ticks')
+
+
 def valid_name(name):
     """Whether ``name`` can name a gripper's topics (non-empty, no ``/``)."""
     return isinstance(name, str) and bool(name) and '/' not in name
@@ -133,17 +153,12 @@ class GripperBank:
     def _travel(g, apply, max_step):
         """Send gripper ``g`` towards its newest pose, at most ``max_step``; return log lines."""
         target = (g.rotation, g.translation)
-        distance = float(np.linalg.norm(g.translation - g.sent[1]))
-        log = []
-        if max_step is not None and distance > max_step:
-            if not g.travelling:
-                log.append(('warning', f'gripper {g.name}: pose {distance:.3g} m away, more '
-                            f'than {max_step:.3g} m a tick (grasp_max_speed): reached over '
-                            f'{int(np.ceil(distance / max_step))} ticks'))
-            target = part_way(g.sent, target, max_step / distance)
-        g.travelling = target[1] is not g.translation
-        apply(['move', g.name, *pose_fields(*target)])
-        g.sent, g.pose_pending = target, g.travelling
+        pose, distance = travel(g.sent, target, max_step)
+        log = [] if pose is target or g.travelling else \
+            [far_warning(f'gripper {g.name}', distance, max_step, 'grasp_max_speed')]
+        g.travelling = pose is not target
+        apply(['move', g.name, *pose_fields(*pose)])
+        g.sent, g.pose_pending = pose, g.travelling
         return log
 
     def forget_grasps(self):

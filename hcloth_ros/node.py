@@ -663,18 +663,20 @@ class ClothSimNode(Node):
         pts = self.state.points_by_id(self.model, self.solver.levels()[-1])
         return points_within(pts, position, self.get_parameter('grasp_radius').value)
 
-    def _max_grasp_step(self):
-        """How far a grasping gripper may travel this tick (m), or None: no limit."""
-        speed = self.get_parameter('grasp_max_speed').value
+    def _max_step(self, parameter):
+        """How far a gripper or an obstacle may travel this tick (m), or None: no limit."""
+        speed = self.get_parameter(parameter).value
         return speed * self.sim.dt * self.sim.substeps if speed > 0 else None
 
     def _tick(self):
         t0 = time.perf_counter()
         self._set_levels()
         for severity, text in self.grippers.apply(self.sim.apply, self._points_near,
-                                                  self._max_grasp_step()):
+                                                  self._max_step('grasp_max_speed')):
             self._log(severity, text)
-        moved = self.obstacles.apply(self.sim.apply)
+        moved, log = self.obstacles.apply(self.sim.apply, self._max_step('obstacle_max_speed'))
+        for severity, text in log:
+            self._log(severity, text)
         commands = self.sim.take_commands()
         report = self.report = self.sim.advance(self._report_retry)
         stamp = self._publish_clock()

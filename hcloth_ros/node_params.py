@@ -38,6 +38,9 @@ NODE_PARAMS = [
           'this fast (m/s of simulated time), so a pose far away is reached over several '
           'ticks instead of tearing the cloth there in one step; 0: no limit', 0.0, 1000.0,
           False),
+    Param('obstacle_max_speed', 5.0, 'a placed moving obstacle travels to its newest pose '
+          'at most this fast (m/s of simulated time), as grippers do; 0: no limit', 0.0,
+          1000.0, False),
     Param('scene.moving_obstacles', [''], 'moving obstacles, one string each: "<name> '
           '<shape> <sizes> [friction]" with shape box (3 half extents), sphere (radius) or '
           'capsule (radius, half length along its z), in m; each follows '

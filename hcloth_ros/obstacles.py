@@ -5,14 +5,16 @@ ROS-free (strings and numbers in, log lines out), tested without a graph. Each o
 is one string ``'<name> <shape> <sizes...> [friction]'``: ``box`` takes three half
 extents, ``sphere`` a radius, ``capsule`` a radius and a half length along its z axis
 (m); a number after the sizes is its friction coefficient (default ``scene.friction``).
-A flood of poses keeps only the newest of each obstacle; nothing is queued.
+A flood of poses keeps only the newest of each obstacle; nothing is queued. A placed
+obstacle travels to its newest pose at most ``max_step`` a tick (the node's
+``obstacle_max_speed``), as grippers do.
 """
 
 import re
 
 from hcloth_ros.core.bodies import MAX_BODIES, SHAPES
 from hcloth_ros.core.poses import pose_fields
-from hcloth_ros.grippers import checked_pose
+from hcloth_ros.grippers import checked_pose, far_warning, travel
 
 # a name must make a valid topic token: cloth/obstacles/<name>/pose
 NAME = re.compile(r'[A-Za-z][A-Za-z0-9_]*$')
@@ -64,6 +66,7 @@ class ObstacleBank:
             bodies.add(name, shape, sizes, friction)
         self.bodies = bodies
         self._pending = {}
+        self._travelling = set()     # names on their way to a pose beyond a tick's travel
 
     def names(self):
         return self.bodies.names()
@@ -85,13 +88,26 @@ class ObstacleBank:
         self._pending[name] = pose
         return None
 
-    def apply(self, apply):
+    def apply(self, apply, max_step=None):
         """
-        Place every obstacle with a new pose for the next step; returns whether any moved.
+        Place every obstacle with a new pose for the next step; return ``(moved, log)``.
 
-        ``apply``: takes the commands (a :class:`~hcloth_ros.simulation.Simulation`'s).
+        ``apply``: takes the commands (a :class:`~hcloth_ros.simulation.Simulation`'s);
+        ``max_step``: the farthest a placed obstacle moves in one call (m; None: no limit;
+        its first pose places it at once); ``log``: ``(severity, message)`` lines.
         """
-        pending, self._pending = self._pending, {}
-        for name, (rotation, translation) in pending.items():
-            apply(['body', name, *pose_fields(rotation, translation)])
-        return bool(pending)
+        pending, self._pending, log = self._pending, {}, []
+        for name, target in pending.items():
+            sent = self.bodies.pose(name)
+            pose, distance = (target, 0.0) if sent is None else travel(sent, target,
+                                                                       max_step)
+            if pose is not target:
+                if name not in self._travelling:
+                    log.append(far_warning(f'obstacle {name}', distance, max_step,
+                                           'obstacle_max_speed'))
+                self._travelling.add(name)
+                self._pending.setdefault(name, target)     # unless a newer one came
+            else:
+                self._travelling.discard(name)
+            apply(['body', name, *pose_fields(*pose)])
+        return bool(pending), log

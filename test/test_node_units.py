@@ -190,6 +190,27 @@ def test_a_pose_far_away_is_travelled_to_at_most_max_step_a_tick(cloth):
                                atol=1e-12)
 
 
+def test_an_obstacle_placed_at_once_then_travels_to_a_far_pose(cloth):
+    """``obstacle_max_speed``: the first pose places the body; 0.35 m away takes 4 ticks."""
+    from hcloth_ros.obstacles import ObstacleBank
+    model, state, control = cloth
+    bank = ObstacleBank(['ball sphere 0.05'], control.bodies, 0.5)
+    apply = Simulation(model, None, state, control, 0.01, 1).apply
+    bank.set_pose('ball', 'world', 'world', (2.0, 0.0, 0.0), (0, 0, 0, 1))
+    assert bank.apply(apply, 0.1) == (True, [])
+    assert control.bodies.pose('ball')[1].tolist() == [2.0, 0.0, 0.0]
+    bank.set_pose('ball', 'world', 'world', (2.0, 0.35, 0.0), (0, 0, 0, 1))
+    moved, log = bank.apply(apply, 0.1)
+    assert moved and log == [('warning', 'obstacle ball: pose 0.35 m away, more than 0.1 m '
+                                         'a tick (obstacle_max_speed): reached over 4 ticks')]
+    ys = [control.bodies.pose('ball')[1][1]]
+    for _ in range(4):
+        moved, log = bank.apply(apply, 0.1)
+        assert log == []
+        ys.append(control.bodies.pose('ball')[1][1])
+    assert ys == pytest.approx([0.1, 0.2, 0.3, 0.35, 0.35], abs=1e-12) and not moved
+
+
 def test_forget_grasps_keeps_poses_and_drops_commands():
     bank = GripperBank(['left'])
     bank.set_pose('left', 'world', 'world', (0, 0, 1), (0, 0, 0, 1))
