@@ -340,7 +340,7 @@ class SelfContact:
         """Go back to a :meth:`checkpoint` (the state went back to where it was taken)."""
         self._key, self._steps, start, noted = checkpoint
         self._start = None if start is None else start.copy()
-        if noted is not None and self._noted is not None and noted.shape == self._noted.shape:
+        if noted is not None:       # (a retry keeps the level, and so the shape)
             np.copyto(self._noted, noted)
             self._uncommitted = True    # the next step starts from these notes
 
