@@ -16,9 +16,10 @@ strain limiting, and the one after the ground's rounds of strain limiting and co
 over all steps and over the steps from 21 on, its mean, 90th percentile and largest, and
 the median of the time a step spends in the calls after its first; then the median, mean
 and 90th percentile over the steps whose first detection found pairs, the layers in
-contact (at 129 x 129 they touch at steps 3-5, land at steps 26-33, lie apart until
-step 48 and slide over each other until step 120 as the folded cloth opens, its bending
-springs resting flat; the medians over all steps hold the steps they are apart); then
+contact, and the median of the pairs those detections found (at 129 x 129 they touch at
+steps 3-5, land at steps 26-33, lie apart until step 48 and slide over each other until
+step 120 as the folded cloth opens, its bending springs resting flat; the medians over all
+steps hold the steps they are apart); then
 where the middle column's edges are. ``--contact-strain`` picks the contact rounds'
 strain limiting (the solver's ``contact_strain``, default its own). The kernel time of a
 step counts its calls and its ``carry``; the median of ``carry`` alone comes last.
@@ -103,11 +104,13 @@ def main(argv=None):
           f'{np.mean([len(step) for step in calls]):.2f} calls a step')
     # the steps with layers in contact: those whose first detection found a pair (the
     # medians above also hold the steps where the layers are apart: falling, or opened)
-    touching = in_contact(totals, [step[0][1] if step else 0 for step in calls])
+    first = [step[0][1] if step else 0 for step in calls]
+    touching = in_contact(totals, first)
     if len(touching):
         print(f'the {len(touching)} steps whose first detection found pairs: kernel a step '
               f'median {np.median(touching):.2f} ms, mean {np.mean(touching):.2f} ms, '
-              f'90th percentile {np.percentile(touching, 90):.2f} ms')
+              f'90th percentile {np.percentile(touching, 90):.2f} ms; pairs found first '
+              f'median {np.median([f for f in first if f > 0]):.0f}')
     print(f'carry: median {1e3 * np.median([c[0] for c in carries]):.3f} ms a step, '
           f'{np.median([c[1] for c in carries]):.0f} points moved')
     # whether the cloth is still folded: the fold starts with its far edge over its near one

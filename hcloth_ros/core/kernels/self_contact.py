@@ -131,8 +131,12 @@ UPWARD = math.sqrt(0.5)
 ON_EDGE = 0.3
 # A point lying on a triangle of its own level, tracked from step to step (see carry):
 # its projection may walk this many triangles a step, ends within INSIDE (barycentric) of
-# the triangle, and lies at most REACH thicknesses above it; farther, it has left it.
-WALKS = 3
+# the triangle, and lies at most REACH thicknesses above it; farther, it has left it. A
+# cell slid along a row or a column is two triangles: 16 covers a layer sliding 7 cells
+# a step (3.3 m/s at 60 Hz on the 129 x 129 bench's 7.8 mm cells); the folded drop's top
+# layer slides 16-18 mm a step over the bottom one, 5-6 triangles, and a walk of 3 lost
+# every note each step (doc/self_contact_log.md)
+WALKS = 16
 INSIDE = 0.05
 REACH = 2.0
 # A projection past the grid's border this far (barycentric) out of the triangle there
@@ -2139,7 +2143,8 @@ def carry(q, qd, dv, q_prev, mass, hold_kind, support, carried, up, thickness, f
 
     ``q``, ``qd``, ``dv``: the level after the step (corrected in place), ``q_prev`` its
     start; ``support``: the obstacles below (see :func:`self_contact`); ``carried``: the
-    triangle each point was last pushed up off (:func:`_resolve_passes`), updated here;
+    triangle each point was last pushed up off (:func:`_resolve_passes`), updated here to
+    the one it lies on at the end of the step (a sliding layer's next walk starts there);
     ``up``: the unit vector against gravity.
 
     A layer lying on another sinks into it every step (``g h^2`` from rest; the solvers
@@ -2197,10 +2202,13 @@ def carry(q, qd, dv, q_prev, mass, hold_kind, support, carried, up, thickness, f
                 continue
             waiting[p] = False
             turns += 1
-            if _bear(x0, x1, qdf, dvf, inv_mass, held_up, p, carried[p] // 2,
-                     1.0 if carried[p] % 2 else -1.0, up, thickness, friction, rows, cols,
-                     h):
-                count += 1
+            code = carried[p]
+            pushed, t = _bear(x0, x1, qdf, dvf, inv_mass, held_up, p, code // 2,
+                              1.0 if code % 2 else -1.0, up, thickness, friction, rows, cols,
+                              h)
+            if t >= 0:      # the next step starts where this one ends
+                carried[p] = 2 * t + code % 2
+            count += pushed
         left -= turns
         ring = turns == 0
     return count
@@ -2212,9 +2220,10 @@ def _bear(x0, x1, qd, dv, inv_mass, support, p, t, side, up, thickness, friction
     """
     Push p up off the triangle under it (tracked from t, p on its ``side``) to 1 + SLACK.
 
-    Returns whether it pushed. See :func:`carry`. At the end of the step p is followed
-    again from t (:func:`_track`: it may have slid onto the next triangle; past the
-    layer's edge it falls freely). The push is self-contact's own (:func:`_push`: shared
+    Returns whether it pushed and the triangle p lies on at the end (-1: none; its note
+    stays for the next step's walk). See :func:`carry`. At the end of the step p is
+    followed again from t (:func:`_track`: it may have slid onto the next triangles; past
+    the layer's edge it falls freely). The push is self-contact's own (:func:`_push`: shared
     by inverse masses, so a layer lying on a hanging layer weighs it down; held points and
     points with no room left to their obstacle stay; inelastic), at p's projection
     clipped into the triangle, along its normal, and so is the friction (:func:`_rub`, up
@@ -2226,7 +2235,7 @@ def _bear(x0, x1, qd, dv, inv_mass, support, p, t, side, up, thickness, friction
     """
     t, plane = _track(x1, p, t, rows, cols)
     if t < 0:
-        return False
+        return False, t
     i, j, k = _triangle(t, cols)
     target = thickness * (1.0 + SLACK)
     pushed = False
@@ -2254,7 +2263,7 @@ def _bear(x0, x1, qd, dv, inv_mass, support, p, t, side, up, thickness, friction
             _rub(x1, qd, dv, support, verts, (u, v, w), (ip, ii, ij, ik), lam, denom, motion,
                  (nx, ny, nz), friction * lift, h)
         pushed = True
-    return pushed
+    return pushed, t
 
 
 @numba.njit(**JIT)
