@@ -99,12 +99,12 @@ class Solver:
         spring of the finest simulated level beyond this (relative) from a start where
         none was is refused too, marked ``stretched``, so that
         :func:`~hcloth_ros.core.recovery.step_with_retries` takes it again in smaller steps
-        (the 129 x 129 double fold's cloth falling back onto itself at up to 3 m/s, pushed
-        apart a pair at a time, left springs at 1.16; retried, 0.49: the README); None:
-        off. Not retried: a start already stretched beyond it (two grippers pulling the
-        cloth taut) and a step without self-contact pairs (a flood of far gripper poses
-        took 15 steps a tick). Grasps and moving bodies move evenly over the smaller
-        steps (:meth:`Control.follow <hcloth_ros.core.control.Control.follow>`).
+        (the 65 x 65 folded cloth's top layer thrown at 5 m/s onto the bottom one, pushed
+        apart a pair at a time, ends its step at 0.55; retried as two half steps, 0.20:
+        the README); None: off. Not retried: a start already stretched beyond it (two
+        grippers pulling the cloth taut) and a step without self-contact pairs (a flood of
+        far gripper poses took 15 steps a tick). Grasps and moving bodies move evenly over
+        the smaller steps (:meth:`Control.follow <hcloth_ros.core.control.Control.follow>`).
     :param builds: ``'serial'`` or ``'parallel'`` kernel builds on every level (or a kernel
         set with their names), or None: the parallel builds on levels large enough to
         split when numba runs several threads (see :mod:`hcloth_ros.core.kernels`).
