@@ -15,7 +15,7 @@ from hcloth_ros.core import ClothBuilder, Control, make_scene, make_solver, Stat
 from hcloth_ros.core import kernels
 from hcloth_ros.core.kernels.self_contact import (_edge_side, _fresh_blocks, _may_cross,
                                                   _pair_side, _resolve, _resolve_passes,
-                                                  _triangle, BOXES_KEPT, BOXES_NEW, carry, INSIDE,
+                                                  _triangle, BOXES_KEPT, BOXES_NEW, carry,
                                                   MAX_SUBSTEPS,
                                                   MIN_SUBSTEPS, obstacle_supports, ON_EDGE,
                                                   patch_cache, REACH, RESOLVE_PASSES, RING,
@@ -1278,19 +1278,18 @@ def test_the_double_fold_at_129_with_the_nodes_retries_keeps_its_springs():
     section's known limits: 2.08, then 8.33 with every step refused, then 2.19 and 1.16;
     ``tools/double_fold.py --size 129``). After the release the lifted cloth falls back onto
     itself at up to 3 m/s; retried in smaller steps (``retry_strain`` 0.5) the largest
-    strain was 0.49. Since sliding layers are carried across cells (``WALKS``) it is
-    0.31 and no step needs a retry (the retries are tested on the thrown fold above).
-    Asserted: every step goes through, ends within ``retry_strain`` unless it started
-    beyond it or took the 8 steps, the largest strain stays under 1 (ten times the strain
-    limit), and no edge goes through a triangle (every third step after the landing).
+    strain is 0.49. Asserted: every step goes through, ends within ``retry_strain`` unless
+    it started beyond it or took the 8 steps, the largest strain stays under 1 (ten times
+    the strain limit), and no edge goes through a triangle (every third step after the
+    landing). Some step is retried: the scene still tests the retries.
     """
     from hcloth_ros.bench.self_contact import scene_setup, second_fold
     model, state, control = scene_setup(129, 'folded')
     solver = make_solver('multigrid', model, thickness=0.004, retry_strain=0.5)
-    step, largest, before = 0, 0.0, 0.0
+    step, largest, before, retried = 0, 0.0, 0.0, 0
 
     def advance(count):
-        nonlocal step, largest, before
+        nonlocal step, largest, before, retried
         for _ in range(count):
             step += 1
             report, taken = step_with_retries(solver, state, control, 1 / 60)
@@ -1300,6 +1299,7 @@ def test_the_double_fold_at_129_with_the_nodes_retries_keeps_its_springs():
             assert report.max_strain <= 0.5 or before > 0.5 or taken == 8 or not met, \
                 (step, report.max_strain, taken)
             before, largest = report.max_strain, max(largest, report.max_strain)
+            retried += taken > 1
             if step >= 45 and step % 3 == 0:
                 assert hashed_intersections(state.q[-1]) == 0, step
 
@@ -1310,7 +1310,7 @@ def test_the_double_fold_at_129_with_the_nodes_retries_keeps_its_springs():
         advance(1)
     control.release('fold')
     advance(30)
-    assert largest < 1.0
+    assert largest < 1.0 and retried > 0
 
 
 def accordion(q, height, gap, layers):
@@ -1554,41 +1554,6 @@ def test_a_point_carried_is_followed_to_the_triangle_under_it_and_let_go_when_li
     dropped = notes.copy()
     _carry(lv, lifted, lifted.copy(), np.zeros_like(qd), support.copy(), dropped)
     assert np.all(dropped[noted] == -1)
-
-
-@pytest.mark.parametrize('cells', [2.5, 5.5])
-def test_a_layer_sliding_cells_in_a_step_is_carried_onto_the_triangles_it_reached(cells):
-    """
-    The top layer slid ``cells`` cells along x in the step and sank ``g h^2``: still carried.
-
-    Its points are followed across the 5 to 11 triangles they passed over
-    (``WALKS``) and put back ``1 + SLACK`` thicknesses above the bottom layer, their
-    notes on the triangles under them at the end; the detection after it finds nothing
-    near (brute force). The folded drop's top layer slides 16-18 mm a step (1 m/s) over
-    cells of 7.8 mm, 5-6 triangles: with a walk of 3 every note was dropped each step and
-    the layer found in the other and pushed out again (1,000-2,900 pairs in a sliding
-    step's first detection, 941 at the median of the steps in contact).
-    """
-    sink = 9.81 * H * H
-    lv, _, _, _, _, _, _, _ = _layers_lying(True, sink)
-    spacing = lv.rest[0]
-    lv, start, end, qd, support, notes, layer, margin = _layers_lying(True, sink,
-                                                                      cells * spacing)
-    cols = lv.cols
-    # the points that stay over the bottom layer (the last columns slide past its edge)
-    stays = np.flatnonzero((notes >= 0) & (np.arange(notes.size) % cols < cols - cells - 1))
-    assert len(stays) > 0.25 * notes.size
-    count, _ = _carry(lv, start, end, qd, support, notes)
-    assert count >= len(stays)
-    x = end.reshape(3, -1)
-    assert np.allclose(x[2, stays], margin + (1.0 + SLACK) * THICKNESS, rtol=0.0, atol=1e-12)
-    tri = triangles(*lv.shape)
-    for p in stays:
-        a, b, c = (x[:, v] for v in tri[notes[p] // 2])
-        weights = np.linalg.lstsq(np.stack([a - c, b - c], axis=1), x[:, p] - c,
-                                  rcond=None)[0]
-        assert min(weights.min(), 1.0 - weights.sum()) >= -INSIDE
-    assert violations(start, end, THICKNESS)[0] == 0
 
 
 @pytest.mark.parametrize('overhang, carried', [(0.25, True), (0.45, True), (0.75, False)])

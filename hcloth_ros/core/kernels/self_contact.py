@@ -131,12 +131,8 @@ UPWARD = math.sqrt(0.5)
 ON_EDGE = 0.3
 # A point lying on a triangle of its own level, tracked from step to step (see carry):
 # its projection may walk this many triangles a step, ends within INSIDE (barycentric) of
-# the triangle, and lies at most REACH thicknesses above it; farther, it has left it. A
-# cell slid along a row or a column is two triangles: 16 covers a layer sliding 7 cells
-# a step (3.3 m/s at 60 Hz on the 129 x 129 bench's 7.8 mm cells); the folded drop's top
-# layer slides 16-18 mm a step over the bottom one, 5-6 triangles, and a walk of 3 lost
-# every note each step (doc/self_contact_log.md)
-WALKS = 16
+# the triangle, and lies at most REACH thicknesses above it; farther, it has left it.
+WALKS = 3
 INSIDE = 0.05
 REACH = 2.0
 # A projection past the grid's border this far (barycentric) out of the triangle there
@@ -2143,8 +2139,7 @@ def carry(q, qd, dv, q_prev, mass, hold_kind, support, carried, up, thickness, f
 
     ``q``, ``qd``, ``dv``: the level after the step (corrected in place), ``q_prev`` its
     start; ``support``: the obstacles below (see :func:`self_contact`); ``carried``: the
-    triangle each point was last pushed up off (:func:`_resolve_passes`), updated here to
-    the one its projection lies in at the end of the step (:func:`_bear`);
+    triangle each point was last pushed up off (:func:`_resolve_passes`), updated here;
     ``up``: the unit vector against gravity.
 
     A layer lying on another sinks into it every step (``g h^2`` from rest; the solvers
@@ -2202,13 +2197,10 @@ def carry(q, qd, dv, q_prev, mass, hold_kind, support, carried, up, thickness, f
                 continue
             waiting[p] = False
             turns += 1
-            code = carried[p]
-            pushed, t = _bear(x0, x1, qdf, dvf, inv_mass, held_up, p, code // 2,
-                              1.0 if code % 2 else -1.0, up, thickness, friction, rows, cols,
-                              h)
-            if t >= 0:      # the next step starts where this one ends
-                carried[p] = 2 * t + code % 2
-            count += pushed
+            if _bear(x0, x1, qdf, dvf, inv_mass, held_up, p, carried[p] // 2,
+                     1.0 if carried[p] % 2 else -1.0, up, thickness, friction, rows, cols,
+                     h):
+                count += 1
         left -= turns
         ring = turns == 0
     return count
@@ -2220,22 +2212,12 @@ def _bear(x0, x1, qd, dv, inv_mass, support, p, t, side, up, thickness, friction
     """
     Push p up off the triangle under it (tracked from t, p on its ``side``) to 1 + SLACK.
 
-    Returns whether it pushed and the triangle p's projection lies in at the end, pushed
-    or not (-1: none; its note stays for the next step's walk). See :func:`carry`. At the
-    end of the step p is followed again from t (:func:`_track`: it may have slid onto the
-    next triangles; past the layer's edge it falls freely). A walk of many triangles
-    could reach a sheet that turned from under p to over it (a roll, a twist): the
-    detection after ``carry`` tests p's path from the step's start to where the push
-    left it, finds such a push through a triangle as a crossing and undoes it (with
-    ``interval`` n, at the next check, as any crossing between checks). (A guard that
-    left to the detection the triangles whose plane p started more than a thickness
-    behind also caught points sliding over a bend, where a far triangle's plane says
-    little: the 129 x 129 double fold without retries went from 0.31 to 3.2.)
-
-    The push is self-contact's own (:func:`_push`: shared by inverse masses, so a layer
-    lying on a hanging layer weighs it down; held points and points with no room left to
-    their obstacle stay; inelastic), at p's projection clipped into the triangle, along
-    its normal, and so is the friction (:func:`_rub`, up
+    Returns whether it pushed. See :func:`carry`. At the end of the step p is followed
+    again from t (:func:`_track`: it may have slid onto the next triangle; past the
+    layer's edge it falls freely). The push is self-contact's own (:func:`_push`: shared
+    by inverse masses, so a layer lying on a hanging layer weighs it down; held points and
+    points with no room left to their obstacle stay; inelastic), at p's projection
+    clipped into the triangle, along its normal, and so is the friction (:func:`_rub`, up
     to ``friction`` times the push: under a point that only fell onto it, Coulomb's law
     under its weight). A second push when the first left the pair short: a vertex of the
     triangle that reached its obstacle on the way stopped there (:func:`_room`) and now
@@ -2244,7 +2226,7 @@ def _bear(x0, x1, qd, dv, inv_mass, support, p, t, side, up, thickness, friction
     """
     t, plane = _track(x1, p, t, rows, cols)
     if t < 0:
-        return False, t
+        return False
     i, j, k = _triangle(t, cols)
     target = thickness * (1.0 + SLACK)
     pushed = False
@@ -2272,7 +2254,7 @@ def _bear(x0, x1, qd, dv, inv_mass, support, p, t, side, up, thickness, friction
             _rub(x1, qd, dv, support, verts, (u, v, w), (ip, ii, ij, ik), lam, denom, motion,
                  (nx, ny, nz), friction * lift, h)
         pushed = True
-    return pushed, t
+    return pushed
 
 
 @numba.njit(**JIT)
