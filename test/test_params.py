@@ -137,11 +137,12 @@ def test_edges_and_solved_strain_limit_reach_the_solver_and_old_recordings_go_wi
     solver = params.build_solver(model, dict(values, **{'self_contact.edges': 'all',
                                                         'solver.solved_strain_limit': 0.1}))
     assert solver.self_contact.edges == 'all' and solver.solved_strain_limit == 0.1
-    # a recording started before them replays as it ran: creases only, no solved limit
+    # a recording started before them replays as it ran: the sharp creases only (the
+    # creases of then), no solved limit
     older = {name: value for name, value in values.items()
              if name not in ('self_contact.edges', 'solver.solved_strain_limit')}
     solver = params.build_solver(model, older)
-    assert solver.self_contact.edges == 'creases' and solver.solved_strain_limit is None
+    assert solver.self_contact.edges == 'sharp' and solver.solved_strain_limit is None
     with pytest.raises(ValueError, match='self_contact.edges'):
         params.resolve({'self_contact.edges': 'some'})
 

@@ -2,7 +2,8 @@
 The contact bench's folded drop folded again across its crease: does the cloth tangle.
 
     .venv/bin/python tools/double_fold.py [--size 65] [--thickness 0.004] \
-        [--solver multigrid] [--fold-steps 72] [--retries] [--option NAME=VALUE ...]
+        [--solver multigrid] [--fold-steps 72] [--retries] [--seed N [--noise 1e-5]] \
+        [--option NAME=VALUE ...]
 
 The folded cloth of ``hcloth_contact_bench`` (``--size`` finest points a side, one numba
 thread) lands in 45 steps; a grasp then takes its far 6 cm strip (both layers) and turns
@@ -16,12 +17,15 @@ again in 2, 4 or 8 steps, and the node's ``solver.retry_strain`` unless ``--opti
 it) and prints the steps retried.
 ``test_self_contact.py::test_a_cloth_folded_twice_does_not_tangle_where_its_creases_cross``
 is this scene at 65 x 65 cut short after the release. ``--thickness none`` runs without
-self-contact.
+self-contact. ``--seed`` moves every level's points by normal noise of ``--noise`` m at the
+start (as ``folded_seeds.py`` does): the scene is chaotic, and a fold that goes through at
+one speed may tangle at the next, so seeds give a sample at one speed.
 """
 
 import argparse
 
 import numba
+import numpy as np
 
 
 def main(argv=None):
@@ -32,6 +36,9 @@ def main(argv=None):
     parser.add_argument('--fold-steps', type=int, default=72)
     parser.add_argument('--retries', action='store_true',
                         help='step as the node does: refused or overstretched steps retried')
+    parser.add_argument('--seed', type=int, default=None,
+                        help='perturb the start with this seed (default: none)')
+    parser.add_argument('--noise', type=float, default=1e-5, help='m, per coordinate')
     parser.add_argument('--option', action='append', default=[], metavar='NAME=VALUE',
                         help='a solver option (YAML value), repeatable')
     args = parser.parse_args(argv)
@@ -44,6 +51,10 @@ def main(argv=None):
     from intersections import intersections
     thickness = None if args.thickness == 'none' else float(args.thickness)
     model, state, control = scene_setup(args.size, 'folded')
+    if args.seed is not None:
+        rng = np.random.default_rng(args.seed)
+        for k in range(model.level_count):
+            state.q[k] = state.q[k] + rng.normal(0.0, args.noise, state.q[k].shape)
     options = assignments(args.option)
     if args.retries:
         options.setdefault('retry_strain', PARAM_BY_NAME['solver.retry_strain'].default)
@@ -81,7 +92,8 @@ def main(argv=None):
     control.release('fold')
     advance(60)
     ground = model.scene.planes[0, 3]
-    print(f'{args.solver} {args.size} x {args.size}, thickness {thickness}: edges through '
+    seed = '' if args.seed is None else f', seed {args.seed}'
+    print(f'{args.solver} {args.size} x {args.size}, thickness {thickness}{seed}: edges through '
           f'triangles after steps {tangled or "none"}; largest strain {largest:.3f}; highest '
           f'point {state.q[finest][2].max() - ground:.3f} m above the ground'
           + (f'; steps retried (as n smaller ones) {retried or "none"}' if args.retries

@@ -61,7 +61,7 @@ def main(argv=None):
         start = time.perf_counter()
         result = kit.self_contact(*arguments)
         # arguments 7 and -2: the moved-points mask and whether boxes are kept (the last
-        # one: all_edges)
+        # one: the crease angle)
         calls[-1].append((time.perf_counter() - start, result[0],
                           int(np.count_nonzero(arguments[7])), arguments[-2]))
         return result

@@ -82,7 +82,7 @@ def per_step(calls, seconds, which):
     """Sum ``seconds`` by step over the calls ``which`` selects (first or later calls)."""
     totals = {}
     for (step, arguments), t in zip(calls, seconds):
-        later = arguments[-2]       # the kernel's reuse flag (before all_edges): set on a
+        later = arguments[-2]       # the kernel's reuse flag (before the crease angle): set on a
         # step's later calls
         if which is None or which == later:
             totals[step] = totals.get(step, 0.0) + t

@@ -116,7 +116,8 @@ class Solver:
         more that moves points alone).
     :param self_contact_interval: check every n-th step.
     :param self_contact_edges: which edges are tested against edges: ``'auto'``,
-        ``'creases'`` or ``'all'`` (:class:`~hcloth_ros.core.self_contact.SelfContact`).
+        ``'creases'``, ``'sharp'`` or ``'all'``
+        (:class:`~hcloth_ros.core.self_contact.SelfContact`).
     :param contact_rounds, contact_sweeps: on a step where a refinement level or the
         finest simulated level touched an obstacle, most rounds of strain limiting (this
         many sweeps, every point free) and contact on it, the coarser levels taking the

@@ -38,12 +38,13 @@ edges are what cross there, and such tangles stretched the perturbed folded drop
 springs to 9 times their rest length (``tools/folded_seeds.py``). Away from the border
 two layers can pass through each other in the same way only where both are creased: an
 edge's ends stay a thickness clear of a layer it passes under only if that layer drops
-by a thickness within half an edge of its crease. So the creases (edges between two
-triangles whose normals part by more than ``2 asin(2 thickness / longest edge)``) are
-tested against the other patch's edges in every pair of patches for crossings, as the
-free edges are, but not kept a thickness away from them (a cloth folded twice, its second
-fold across the first, tangled at their crossing without it; the turns of a rolled-up
-border, kept apart, stretched its springs).
+by a thickness within half an edge of its crease, and they keep that clearance only at
+the ends of a step. So the creases (edges between two triangles whose normals part by
+more than ``2 asin(2 thickness / longest edge)`` or ``CREASE_ANGLE``, whichever is less:
+:func:`_crease_cosine`) are tested against the other patch's edges in every pair of
+patches for crossings, as the free edges are, but not kept a thickness away from them (a
+cloth folded twice, its second fold across the first, tangled at their crossing without
+it; the turns of a rolled-up border, kept apart, stretched its springs).
 
 Response (at the end positions; rounds of detection, each followed by ``RESOLVE_PASSES``
 Gauss-Seidel passes over its pairs, until a detection finds none, the last round moving
@@ -115,6 +116,9 @@ SUB = 2
 # 80 degrees) cannot touch themselves or their neighbour patches (see _pair_needed).
 FLAT_COSINE = 0.17
 FLAT_HALF_ANGLE = math.acos(FLAT_COSINE)
+# Edges bent more than this (rad) are creases by default, whatever the thickness (see
+# _crease_cosine).
+CREASE_ANGLE = math.radians(10.0)
 # Pairs are pushed this fraction beyond the thickness (see self_contact).
 SLACK = 0.05
 # Gauss-Seidel passes over the pairs of one detection.
@@ -1363,6 +1367,36 @@ def _detect(x0, x1, rows, cols, thickness, substeps, dirty, fresh, fresh_blocks,
 
 
 @numba.njit(**JIT)
+def _crease_cosine(thickness, edge, angle):
+    """
+    Return the cosine of the bend (angle between two normals) past which an edge is a crease.
+
+    ``edge``: the level's longest edge at the step's start. A crease is an edge bent by
+    more than the lesser of two angles. The thickness's: an edge as long as ``edge``
+    passing under a crease with both its ends a thickness clear of the crease's two
+    triangles needs each of them to drop by a thickness within half that edge of the
+    crease's line, so to slope by ``asin(2 thickness / edge)`` or more from the edge
+    passing under it: their normals part by twice that at least (the edge across the
+    crease's line: the least bend; a bend spread over two edges a spacing apart needs more
+    than the thickness allows). And ``angle`` (rad; ``CREASE_ANGLE`` by default): the
+    point tests keep the ends a thickness clear only at the ends of a step; in it a point
+    may come as near a layer as it likes without crossing it, and edges bent less than the
+    thickness's angle hooked through each other where layers fell onto each other fast or
+    crumpled (the 129 x 129 double fold, whose thickness's angle is 93 degrees, tangled
+    so in 6 of 44 runs at other fold speeds and seeds, and none with 10 degrees:
+    doc/self_contact_log.md). ``angle`` 0: every bent edge (a cloth crumpled in
+    compression brings rows a few apart together, and there two edges can hook through
+    each other while their ends cross only triangles within ``RING`` of them, which are
+    not tested: ``multigrid`` solving the 129 x 129 folded drop's finest level tangled so
+    from step 21, edges 3 rows apart bent 8-47 degrees); pi: the thickness's angle alone.
+    """
+    sine = math.sin(0.5 * min(max(angle, 0.0), math.pi))
+    if edge > 0.0:
+        sine = min(sine, 2.0 * thickness / edge)
+    return math.cos(2.0 * math.asin(sine))
+
+
+@numba.njit(**JIT)
 def _has_creases(crease, rows, cols, bi, bj):
     """Whether patch (bi, bj) has a crease (at either end of the step, :func:`_patch_creases`)."""
     for r in range(bi * PATCH, min((bi + 1) * PATCH, rows - 1)):
@@ -1847,8 +1881,9 @@ def self_contact(
         # (see carry and _resolve_passes)
         boxes, ends, cones, touched, subs, subs_ready, start_edge, crease, crease_ready,
         carried, reuse,
-        # input: test every bent edge against the other patches' edges, not only creases
-        all_edges=False):
+        # input: the most an edge may bend (rad) and not be a crease, tested against the
+        # other patches' edges (:func:`_crease_cosine`; 0: every bent edge)
+        crease_angle=CREASE_ANGLE):
     """
     Keep a level's points ``thickness`` away from its triangles (see the module docstring).
 
@@ -1889,22 +1924,7 @@ def self_contact(
         # gripper sent 2.8 m in one step took 43 s of detection on 65 x 65
         return -1, 0, 0, False
     substeps = min(MAX_SUBSTEPS, max(MIN_SUBSTEPS, int(math.ceil(longest / (0.5 * edge)))))
-    # creases: edges bent enough for an edge as long as the longest at the start to pass
-    # under them with both its ends a thickness clear of their two triangles. Each of
-    # those triangles must drop by a thickness within half that edge of the crease's
-    # line: slope by asin(2 thickness / edge) or more from the edge passing under it, so
-    # their normals part by twice that at least (the edge across the crease's line: the
-    # least bend; a bend spread over two edges a spacing apart needs more than the
-    # thickness allows). A cloth crumpled in compression brings rows a few apart together
-    # where none of its edges bends that much, and there two edges can hook through each
-    # other while their ends cross only triangles within RING of them, which are not
-    # tested: ``all_edges`` flags every edge that bends at all (multigrid solving the
-    # 129 x 129 folded drop's finest level tangled so from step 21: edges 3 rows apart,
-    # bent 8-47 degrees)
-    crease_sine = min(1.0, 2.0 * thickness / start_edge[0]) if start_edge[0] > 0.0 else 1.0
-    if all_edges:
-        crease_sine = 0.0
-    crease_cosine = math.cos(2.0 * math.asin(crease_sine))
+    crease_cosine = _crease_cosine(thickness, start_edge[0], crease_angle)
     # the first detection tests only round the points marked moved (the caller's: those
     # that moved since its last call's first detection)
     fresh = moved.copy().reshape(n)
