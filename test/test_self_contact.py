@@ -1271,9 +1271,9 @@ def test_a_cloth_folded_twice_does_not_tangle_where_its_creases_cross(name):
 
 @pytest.mark.slow
 @pytest.mark.parametrize('fold_steps', [72, 66])
-def test_the_double_fold_at_129_with_the_nodes_retries_keeps_its_springs(fold_steps):
+def test_the_double_fold_at_129_stepped_as_the_node_steps_keeps_its_springs(fold_steps):
     """
-    The double fold above at 129 x 129, with the node's retries of overstretched steps.
+    The double fold above at 129 x 129, stepped with the node's retries of overstretched steps.
 
     It regressed twice unseen while only 65 x 65 was tested (README, the self-contact
     section's known limits: 2.08, then 8.33 with every step refused, then 2.19 and 1.16;
@@ -1282,10 +1282,12 @@ def test_the_double_fold_at_129_with_the_nodes_retries_keeps_its_springs(fold_st
     with a step retried in 8, while creases were only the edges bent past the thickness's
     angle (93 degrees here): edges bent less hooked through each other. With creases from
     10 degrees (:func:`~hcloth_ros.core.kernels.self_contact._crease_cosine`) neither
-    fold needs a retry (0.23 and 0.35). Asserted: every step goes through, ends within
-    ``retry_strain`` unless it started beyond it or took the 8 steps, the largest strain
-    stays under 1 (ten times the strain limit), and no edge goes through a triangle
-    (every third step after the landing; the tangle at 66 lasted 12 steps).
+    fold needs a retry (0.23 and 0.35; the retries themselves:
+    :func:`test_a_step_of_layers_meeting_fast_is_taken_again_in_smaller_steps`).
+    Asserted: every step goes through, ends within ``retry_strain`` unless it started
+    beyond it or took the 8 steps, the largest strain stays under 1 (ten times the strain
+    limit), and no edge goes through a triangle (every third step after the landing; the
+    tangle at 66 lasted 12 steps).
     """
     from hcloth_ros.bench.self_contact import scene_setup, second_fold
     model, state, control = scene_setup(129, 'folded')
@@ -1628,9 +1630,9 @@ def test_edges_a_crumpled_cloth_hooks_through_each_other_are_caught_unless_only_
     On the crumpled cloth two edges 3 rows apart hook through each other while their ends
     cross only triangles within ``RING`` of them (not tested), bent 8-47 degrees. Tested
     against the sharp creases alone (``self_contact_edges`` 'sharp': bent past the
-    thickness's angle, 93 degrees at this spacing) the call leaves 4 edges through
-    triangles; against the edges bent past 10 degrees too ('creases') or every bent edge
-    ('all') none, and no point near or across a triangle.
+    thickness's angle, 82 degrees on this cut's longest edge, 12.2 mm) the call leaves 4
+    edges through triangles; against the edges bent past 10 degrees too ('creases') or
+    every bent edge ('all') none, and no point near or across a triangle.
     """
     assert _crumpled_step(np.pi)[2] == 4
     for angle in (CREASE_ANGLE, 0.0):
@@ -1650,6 +1652,10 @@ def test_a_crease_is_an_edge_bent_past_the_thickness_angle_or_the_crease_angle()
     assert _crease_cosine(0.001, 0.1, CREASE_ANGLE) == pytest.approx(
         np.cos(2 * np.arcsin(0.02)))
     assert _crease_cosine(0.004, 0.011, 0.0) == 1.0
+    # no edge length: the angle alone (pi, the thickness's bound alone: nothing a crease)
+    assert _crease_cosine(0.004, 0.0, CREASE_ANGLE) == pytest.approx(np.cos(np.radians(10)))
+    assert _crease_cosine(0.004, 0.0, np.pi) == pytest.approx(-1.0)
+    assert _crease_cosine(0.004, 0.011, 7.0) == _crease_cosine(0.004, 0.011, np.pi)
 
 
 def test_edges_auto_tests_all_edges_on_a_solved_level_and_creases_on_a_refined_one(
@@ -1677,7 +1683,9 @@ def test_edges_auto_tests_all_edges_on_a_solved_level_and_creases_on_a_refined_o
         seen.clear()
         solver = make_solver(name, model, thickness=THICKNESS, builds='serial', **options)
         assert solver.step(folded_state(model, 0.05), Control(model), H).ok
+        # (a float: a bool would compile another signature and read as 0 or 1 rad)
         assert seen and set(seen) == {expected}, (name, options)
+        assert all(type(angle) is float for angle in seen), seen
     with pytest.raises(ValueError, match='self_contact_edges'):
         make_solver('multigrid', model, thickness=THICKNESS, self_contact_edges='some')
 

@@ -23,6 +23,7 @@ writes the captured calls (about 3 MB a call at 129 x 129) for another version t
 import argparse
 import hashlib
 import importlib
+import math
 import pickle
 import time
 
@@ -78,6 +79,19 @@ def replay(calls, repeats):
     return np.array(best), digest.hexdigest()[:12]
 
 
+def crease_angle(arguments):
+    """
+    Return a captured call's arguments with the last one the kernel's crease angle.
+
+    Calls saved before 2026-11-30 end in ``all_edges`` (a bool): False, the creases of
+    then (pi: the thickness's bound alone), True every bent edge (0).
+    """
+    last = arguments[-1]
+    if isinstance(last, (bool, np.bool_)):
+        last = 0.0 if last else math.pi
+    return list(arguments[:-1]) + [float(last)]
+
+
 def per_step(calls, seconds, which):
     """Sum ``seconds`` by step over the calls ``which`` selects (first or later calls)."""
     totals = {}
@@ -102,6 +116,7 @@ def main(argv=None):
     if args.load:
         with open(args.load, 'rb') as f:
             calls = pickle.load(f)
+        calls = [(step, crease_angle(arguments)) for step, arguments in calls]
     else:
         first, last = (int(v) for v in args.steps.split(':'))
         calls = capture(args.size, first, last)

@@ -1389,6 +1389,8 @@ def _crease_cosine(thickness, edge, angle):
     each other while their ends cross only triangles within ``RING`` of them, which are
     not tested: ``multigrid`` solving the 129 x 129 folded drop's finest level tangled so
     from step 21, edges 3 rows apart bent 8-47 degrees); pi: the thickness's angle alone.
+    ``angle`` is taken within 0..pi; with no edge length (``edge`` not above 0) it alone
+    bounds the bend (pi: no creases).
     """
     sine = math.sin(0.5 * min(max(angle, 0.0), math.pi))
     if edge > 0.0:
@@ -2335,8 +2337,8 @@ def settle(q, mass, hold_kind, support, thickness, iterations, boxes, ends, cone
     qd, dv = np.zeros((3, n)), np.zeros((3, n))   # pushes move positions alone
     subs_ready[:, :] = False
     crease_ready[:, :, :] = False
-    crease_sine = min(1.0, 2.0 * thickness / max(_longest_edge(x, rows, cols), 1e-300))
-    crease_cosine = math.cos(2.0 * math.asin(crease_sine))
+    # (crossings alone are tested against creases, and nothing moves here: any bound does)
+    crease_cosine = _crease_cosine(thickness, _longest_edge(x, rows, cols), math.pi)
     fresh = np.ones(n, dtype=np.bool_)
     fresh_blocks = _fresh_blocks(fresh, rows, cols)
     dirty = np.zeros(((rows - 2) // PATCH + 1, (cols - 2) // PATCH + 1), dtype=np.bool_)
