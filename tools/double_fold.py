@@ -25,7 +25,6 @@ one speed may tangle at the next, so seeds give a sample at one speed.
 import argparse
 
 import numba
-import numpy as np
 
 
 def main(argv=None):
@@ -43,7 +42,7 @@ def main(argv=None):
                         help='a solver option (YAML value), repeatable')
     args = parser.parse_args(argv)
     numba.set_num_threads(1)
-    from hcloth_ros.bench.self_contact import scene_setup, second_fold
+    from hcloth_ros.bench.self_contact import perturb, scene_setup, second_fold
     from hcloth_ros.core import make_solver
     from hcloth_ros.core.kernels import stats
     from hcloth_ros.core.recovery import step_with_retries
@@ -52,9 +51,7 @@ def main(argv=None):
     thickness = None if args.thickness == 'none' else float(args.thickness)
     model, state, control = scene_setup(args.size, 'folded')
     if args.seed is not None:
-        rng = np.random.default_rng(args.seed)
-        for k in range(model.level_count):
-            state.q[k] = state.q[k] + rng.normal(0.0, args.noise, state.q[k].shape)
+        perturb(state, args.seed, args.noise)
     options = assignments(args.option)
     if args.retries:
         options.setdefault('retry_strain', PARAM_BY_NAME['solver.retry_strain'].default)

@@ -23,7 +23,6 @@ and 84-89); now its largest strain is 0.24 with no edge through a triangle
 import argparse
 
 import numba
-import numpy as np
 
 
 def main(argv=None):
@@ -39,7 +38,7 @@ def main(argv=None):
                         help='a multigrid solver option, repeatable')
     args = parser.parse_args(argv)
     numba.set_num_threads(1)
-    from hcloth_ros.bench.self_contact import scene_setup
+    from hcloth_ros.bench.self_contact import perturb, scene_setup
     from hcloth_ros.core import make_solver
     from hcloth_ros.core.recovery import step_with_retries
     from hcloth_ros.params import assignments, PARAM_BY_NAME
@@ -49,9 +48,7 @@ def main(argv=None):
         options.setdefault('retry_strain', PARAM_BY_NAME['solver.retry_strain'].default)
     for seed in (int(s) for s in args.seeds.split(',')):
         model, state, control = scene_setup(args.size, 'folded')
-        rng = np.random.default_rng(seed)
-        for k in range(model.level_count):
-            state.q[k] = state.q[k] + rng.normal(0.0, args.noise, state.q[k].shape)
+        perturb(state, seed, args.noise)
         solver = make_solver('multigrid', model, **options)
         largest, over, refused, retried, tangled = 0.0, 0, [], [], {}
         for step in range(1, args.steps + 1):

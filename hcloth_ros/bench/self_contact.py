@@ -107,6 +107,13 @@ def scene_setup(n, scene):
     return model, state, Control(model)
 
 
+def perturb(state, seed, noise):
+    """Move every level's points by normal noise of ``noise`` m (a chaotic scene's sample)."""
+    rng = np.random.default_rng(seed)
+    for k in range(len(state.q)):
+        state.q[k] = state.q[k] + rng.normal(0.0, noise, state.q[k].shape)
+
+
 # the finger's axis along y: the body's z turned onto y
 ALONG_Y = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])
 

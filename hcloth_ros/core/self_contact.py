@@ -208,8 +208,9 @@ class SelfContact:
                 return 0
         step_start = state.q[k] if self._start is None else self._start
         start, reuse = self._path_start(k, state, step_start, moved is not None)
-        edges = 'all' if self.edges == 'auto' and solver.solves(k) else \
-            ('creases' if self.edges == 'auto' else self.edges)
+        edges = self.edges
+        if edges == 'auto':
+            edges = 'all' if solver.solves(k) else 'creases'
         crease_angle = CREASE_ANGLES[edges]
         for attempt in range(ROUNDS):
             np.copyto(before, solver._q[k])

@@ -2337,8 +2337,9 @@ def settle(q, mass, hold_kind, support, thickness, iterations, boxes, ends, cone
     qd, dv = np.zeros((3, n)), np.zeros((3, n))   # pushes move positions alone
     subs_ready[:, :] = False
     crease_ready[:, :, :] = False
-    # (crossings alone are tested against creases, and nothing moves here: any bound does)
-    crease_cosine = _crease_cosine(thickness, _longest_edge(x, rows, cols), math.pi)
+    # no creases: they are tested for crossings alone, and nothing moves here (a bound
+    # would cost a pass over the level for edge tests that cannot find a pair)
+    crease_cosine = -1.0
     fresh = np.ones(n, dtype=np.bool_)
     fresh_blocks = _fresh_blocks(fresh, rows, cols)
     dirty = np.zeros(((rows - 2) // PATCH + 1, (cols - 2) // PATCH + 1), dtype=np.bool_)
