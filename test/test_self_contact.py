@@ -1205,6 +1205,29 @@ def test_the_contact_bench_reports_the_kernel_over_the_steps_in_contact():
     assert result['kernel_touching_median_ms'] > 0.0
 
 
+def test_the_calls_tool_runs_each_edges_setting_in_turn_and_charts_them(tmp_path, capsys):
+    """
+    ``tools/self_contact_calls.py --edges``: one run a setting, alternated, then the chart.
+
+    The README's cost chart is this tool's ``--plot``; a setting the wrapper does not know
+    is refused before any run. At 17 x 17 the drop's layers touch within 40 steps.
+    """
+    calls = load_tool('self_contact_calls')
+    chart = tmp_path / 'cost.png'
+    calls.main(['--size', '17', '--steps', '40', '--every', '1000', '--edges', 'sharp,all',
+                '--repeats', '2', '--plot', str(chart)])
+    out = capsys.readouterr().out
+    runs = [line.split(',')[0] for line in out.splitlines() if line.startswith('== edges')]
+    assert runs == ['== edges sharp', '== edges all'] * 2
+    assert out.count('edges sharp: kernel a step') == 2
+    assert out.count('edges all: kernel a step') == 2
+    assert out.count('steps whose first detection found pairs') == 4
+    assert chart.read_bytes()[:8] == b'\x89PNG\r\n\x1a\n'
+    with pytest.raises(SystemExit):
+        calls.main(['--size', '17', '--steps', '1', '--edges', 'sharp,blunt'])
+    assert 'blunt' in capsys.readouterr().err
+
+
 def test_a_thickness_not_below_the_finest_spacing_is_named_with_the_spacing():
     """
     The kernel assumes the thickness is below the finest spacing (thickness_warning).

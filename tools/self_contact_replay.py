@@ -2,7 +2,7 @@
 Self-contact's kernel calls of the folded drop captured, then replayed alone: time and result.
 
     .venv/bin/python tools/self_contact_replay.py [--size 129] [--steps 61:100] \
-        [--repeats 3] [--save FILE | --load FILE]
+        [--repeats 3] [--save FILE | --load FILE] [--edges creases|sharp|all]
 
 Runs the contact bench's folded drop (``multigrid``, thickness 4 mm, one numba thread),
 keeps a copy of every argument of each finest-level kernel call in the steps asked for
@@ -18,6 +18,8 @@ where ``tools/self_contact_calls.py`` follows each version's own motion (a diffe
 in a chaotic drop changes which steps are in contact, and so the medians). ``--save``
 writes the captured calls (about 3 MB a call at 129 x 129) for another version to
 ``--load``: run the tool with ``PYTHONPATH`` pointing at each version's tree.
+``--edges`` replays the calls with that setting's crease angle instead of the captured one
+(``core.self_contact.CREASE_ANGLES``): what the edge tests cost on the same work.
 """
 
 import argparse
@@ -111,6 +113,8 @@ def main(argv=None):
     store = parser.add_mutually_exclusive_group()
     store.add_argument('--save', help='write the captured calls to this file')
     store.add_argument('--load', help='replay the calls of this file instead of capturing')
+    parser.add_argument('--edges', choices=('creases', 'sharp', 'all'),
+                        help="replay with this self-contact edges setting's crease angle")
     args = parser.parse_args(argv)
     numba.set_num_threads(1)
     if args.load:
@@ -125,6 +129,10 @@ def main(argv=None):
                 pickle.dump(calls, f)
     if not calls:
         raise SystemExit('no kernel calls in those steps')
+    if args.edges:
+        from hcloth_ros.core.self_contact import CREASE_ANGLES
+        calls = [(step, arguments[:-1] + [CREASE_ANGLES[args.edges]])
+                 for step, arguments in calls]
     replay(calls[:1], 1)        # compiled or loaded before the timing
     seconds, digest = replay(calls, args.repeats)
     print(f'{len(calls)} calls in {len(per_step(calls, seconds, None))} steps, '
