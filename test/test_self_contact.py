@@ -1226,6 +1226,9 @@ def test_the_calls_tool_runs_each_edges_setting_in_turn_and_charts_them(tmp_path
     with pytest.raises(SystemExit):
         calls.main(['--size', '17', '--steps', '1', '--edges', 'sharp,blunt'])
     assert 'blunt' in capsys.readouterr().err
+    with pytest.raises(SystemExit):     # --edges sets it
+        calls.main(['--size', '17', '--steps', '1', '--option', 'self_contact_edges=all'])
+    assert 'self_contact_edges is set by --edges' in capsys.readouterr().err
 
 
 def test_a_thickness_not_below_the_finest_spacing_is_named_with_the_spacing():

@@ -3,7 +3,7 @@ Self-contact's kernel calls step by step on the contact bench's folded drop.
 
     .venv/bin/python tools/self_contact_calls.py [--size 129] [--steps 60] [--every 5] \
         [--contact-strain jacobi] [--solver hierarchical] [--edges auto,sharp,...] \
-        [--repeats 1] [--plot FILE.png]
+        [--repeats 1] [--plot FILE.png] [--option NAME=VALUE ...]
 
 The folded cloth of ``hcloth_contact_bench`` (``multigrid`` or ``--solver``, thickness
 4 mm, one numba thread) falls onto the ground; each self-contact kernel call of the
@@ -30,7 +30,9 @@ each, ``--repeats`` rounds of them alternated, so that the machine's hour weighs
 alike); each run follows its own motion, the drop being chaotic. ``--plot`` charts every
 run's kernel time a step against issue 10's target (1.5 ms at 129 x 129): the README's
 ``doc/self_contact_cost.png`` is ``--steps 150 --every 1000 --edges creases,sharp,all
---repeats 2 --plot doc/self_contact_cost.png``.
+--repeats 2 --plot doc/self_contact_cost.png``. ``--option`` passes a solver option (a
+YAML value), as ``tools/double_fold.py`` does: ``--option accurate_level=9 --option
+solved_strain_limit=0.1`` has ``multigrid`` solve the finest level itself.
 """
 
 import argparse
@@ -180,8 +182,11 @@ def main(argv=None):
     parser.add_argument('--repeats', type=int, default=1,
                         help='runs of each --edges value, alternated')
     parser.add_argument('--plot', help='chart every run to this PNG file')
+    parser.add_argument('--option', action='append', default=[], metavar='NAME=VALUE',
+                        help='a solver option (YAML value), repeatable')
     args = parser.parse_args(argv)
     from hcloth_ros.core.self_contact import EDGES
+    from hcloth_ros.params import assignments
     choices = args.edges.split(',')
     for edges in choices:
         if edges not in EDGES:
@@ -189,7 +194,14 @@ def main(argv=None):
     if args.repeats < 1:
         parser.error('--repeats must be 1 or more')
     numba.set_num_threads(1)
-    options = {} if args.contact_strain is None else {'contact_strain': args.contact_strain}
+    try:
+        options = assignments(args.option)
+    except ValueError as error:
+        parser.error(f'--option: {error}')
+    if args.contact_strain is not None:
+        options['contact_strain'] = args.contact_strain
+    if 'self_contact_edges' in options:
+        parser.error('--option: self_contact_edges is set by --edges')
     runs = []
     for repeat in range(args.repeats):
         for edges in choices:
