@@ -70,6 +70,7 @@ from hcloth_ros import lifetime, memory, params
 from hcloth_ros.core import kernels_cached, warm_up
 from hcloth_ros.core.blas import limit_openblas_threads
 from hcloth_ros.core.control import PINNED
+from hcloth_ros.core.recovery import retry_warning
 from hcloth_ros.core.self_contact import solved_level_warning, thickness_warning
 from hcloth_ros.core.solvers import HierarchicalSolver
 from hcloth_ros.diagnostics import node_status
@@ -147,7 +148,7 @@ class ClothSimNode(Node):
         self.model, self.solver, self.state, self.control = \
             self.sim.model, self.sim.solver, self.sim.state, self.sim.control
         self.obstacles = self.sim.obstacles
-        self._warn_thick_self_contact()
+        self._warn_self_contact_settings()
         # multi-level solvers simulate levels on demand and publish any level of detail
         self._levelled = isinstance(self.solver, HierarchicalSolver)
         self.frame_id = self.get_parameter('frame_id').value
@@ -205,16 +206,18 @@ class ClothSimNode(Node):
             f'tick, {self._pace()}')
 
     # --- start-up ----------------------------------------------------------------------
-    def _warn_thick_self_contact(self):
+    def _warn_self_contact_settings(self):
         """
         Log (and return) what self-contact's settings will not do well, or None.
 
         A thickness not below the finest spacing; the finest level solved by multigrid
-        without strain limiting on it (``solved_level_warning``).
+        without strain limiting on it (``solved_level_warning``); retries below the strain
+        limit (``retry_warning``).
         """
         contact = self.solver.self_contact
         texts = [thickness_warning(self.model, contact.thickness),
-                 solved_level_warning(self.solver)] if contact else []
+                 solved_level_warning(self.solver),
+                 retry_warning(self.solver)] if contact else []
         text = '; '.join(t for t in texts if t) or None
         if text:
             self.get_logger().warning(text)
@@ -488,6 +491,10 @@ class ClothSimNode(Node):
                 self.lod_level = self.governor.floor = p.value
             elif p.name in SETTINGS:
                 self.sim.apply(['set', p.name, plain(p.value)])
+        if {p.name for p in changes} & {'solver.retry_strain', 'solver.strain_limit'}:
+            text = retry_warning(self.solver)
+            if text:
+                self.get_logger().warning(text)
         if _changes_scene(changes):
             # built a second time (the check built it too): rare, and the command then
             # holds only values, as a replay needs

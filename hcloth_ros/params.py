@@ -111,7 +111,8 @@ PARAMS = [
           'finest spring stretches beyond this (0.5 = 50 %) from a start where none was is '
           'taken again as 2, then 4, then 8 smaller steps (the last however far they '
           'stretch; grippers and bodies move evenly over them): layers of the cloth meeting '
-          'fast; 0 switches it off', 0.0, 5.0, False),
+          'fast; keep it above solver.strain_limit (the node warns otherwise); 0 switches '
+          'it off', 0.0, 5.0, False),
     Param('solver.dt', 1 / 60, 'simulated seconds per step (s)', 1e-6, 0.1, False),
     Param('solver.substeps', 1, 'solver steps per timer tick', 1, 100, False),
     Param('solver.contact_rounds', 16, 'most rounds of strain limiting '

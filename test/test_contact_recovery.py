@@ -6,7 +6,7 @@ A fold over a table edge, a cloth started inside a box, a step retried in smalle
 
 from hcloth_ros.core import ClothBuilder, Control, make_scene, make_solver, Placement, State
 from hcloth_ros.core.kernels import contact_strain
-from hcloth_ros.core.recovery import step_with_retries
+from hcloth_ros.core.recovery import retry_warning, step_with_retries
 import numpy as np
 import pytest
 
@@ -363,3 +363,27 @@ def test_refused_steps_are_retried_in_smaller_steps():
     state, splits = run(True)
     assert state.time == pytest.approx(2.0) and 0 not in splits and max(splits) > 1
     assert np.all(np.isfinite(state.q[0]))
+
+
+def test_retries_below_the_strain_limit_are_warned_of():
+    """
+    A retry strain not above the strain limit would redo steps the limit accepts.
+
+    Strain limiting leaves springs up to its limit: with ``retry_strain`` at or below it,
+    a contact step that stretches a spring of a slack cloth within the limit is taken
+    again in up to 14 smaller steps. Without self-contact nothing is retried for strain.
+    """
+    model = ClothBuilder(resolution=(9, 9), level_count=2).finalize()
+
+    def warning(**options):
+        return retry_warning(make_solver('multigrid', model, **options))
+    assert warning(thickness=0.004, retry_strain=0.5) is None     # the node's defaults
+    assert warning(thickness=0.004, retry_strain=0.2, strain_limit=None) is None
+    assert warning(thickness=0.004) is None                         # no retries
+    assert warning(retry_strain=0.05) is None                       # no self-contact
+    for retry in (0.05, 0.1):
+        text = warning(thickness=0.004, retry_strain=retry)
+        assert f'solver.retry_strain {retry:g} is not above solver.strain_limit 0.1' in text
+    solver = make_solver('multigrid', model, thickness=0.004, retry_strain=0.5)
+    solver.strain_limit = 0.6       # as the node sets it at run time
+    assert 'is not above solver.strain_limit 0.6' in retry_warning(solver)

@@ -3,6 +3,7 @@
 import os
 import re
 import time
+from types import SimpleNamespace
 
 from geometry_msgs.msg import PoseStamped
 from hcloth_ros.core import blas
@@ -494,7 +495,13 @@ def test_array_parameters_change_through_the_parameter_service(graph):
     assert sim.model.scene.spheres.shape == (1, 4)
 
 
-def test_a_self_contact_thicker_than_the_finest_spacing_is_warned_of_at_start():
+def test_self_contact_settings_that_will_not_do_well_are_warned_of():
+    """
+    The node warns of self-contact settings it will not do well with.
+
+    At start: a thickness not below the spacing, a solved finest level with no strain limit
+    on it, retries below the strain limit; the last also when either is set at run time.
+    """
     # 10 cm over the default 65 x 65 points: 1.6 mm a spacing, under the 4 mm thickness
     context = rclpy.Context()
     rclpy.init(context=context)
@@ -503,21 +510,34 @@ def test_a_self_contact_thicker_than_the_finest_spacing_is_warned_of_at_start():
             Parameter('cloth.width', value=0.1), Parameter('cloth.height', value=0.1),
             Parameter('self_contact.thickness', value=0.004)])
         assert 'is not below the finest grid spacing 0.00156 m' in \
-            sim._warn_thick_self_contact()
+            sim._warn_self_contact_settings()
         sim.destroy_node()
         sim = ClothSimNode(context=context, parameter_overrides=[
             Parameter('self_contact.thickness', value=0.004)])
-        assert sim._warn_thick_self_contact() is None        # 15.6 mm a spacing
+        assert sim._warn_self_contact_settings() is None        # 15.6 mm a spacing
         sim.destroy_node()
         solved = [Parameter('self_contact.thickness', value=0.004),
                   Parameter('solver.accurate_level', value=3)]
         sim = ClothSimNode(context=context, parameter_overrides=solved)
-        assert 'set solver.solved_strain_limit' in sim._warn_thick_self_contact()
+        assert 'set solver.solved_strain_limit' in sim._warn_self_contact_settings()
         sim.destroy_node()
         sim = ClothSimNode(context=context, parameter_overrides=solved + [
             Parameter('solver.solved_strain_limit', value=0.1)])
-        assert sim._warn_thick_self_contact() is None
+        assert sim._warn_self_contact_settings() is None
         assert sim.solver.solved_strain_limit == 0.1 and sim.solver.self_contact.edges == 'auto'
+        sim.destroy_node()
+        # retries below the strain limit: at start, and when either is set at run time
+        sim = ClothSimNode(context=context, parameter_overrides=[
+            Parameter('self_contact.thickness', value=0.004),
+            Parameter('solver.retry_strain', value=0.05)])
+        assert 'solver.retry_strain 0.05 is not above solver.strain_limit 0.1' in \
+            sim._warn_self_contact_settings()
+        logged = []
+        sim.get_logger = lambda: SimpleNamespace(warning=logged.append)
+        assert sim.set_parameters([Parameter('solver.retry_strain', value=0.5)])[0].successful
+        assert logged == [] and sim.solver.retry_strain == 0.5
+        assert sim.set_parameters([Parameter('solver.strain_limit', value=0.7)])[0].successful
+        assert len(logged) == 1 and 'retry_strain 0.5 is not above' in logged[0]
         sim.destroy_node()
     finally:
         rclpy.shutdown(context=context)

@@ -30,6 +30,25 @@ def _stretch_allowed(solver, allowed):
         solver.retry_strain = kept
 
 
+def retry_warning(solver):
+    """
+    Return why the solver's retries would redo steps its strain limit accepts, or None.
+
+    ``retry_strain`` not above ``strain_limit``, with self-contact on: strain limiting
+    leaves springs up to the limit, so a step in which self-contact found pairs and that
+    stretches a spring of a cloth within ``retry_strain`` past it, but not past the limit,
+    is refused and taken again in up to 2 + 4 + 8 smaller steps for a stretch the limit
+    allows.
+    """
+    retry, limit = solver.retry_strain, solver.strain_limit
+    if solver.self_contact is None or retry is None or limit is None or retry > limit:
+        return None
+    return (f'solver.retry_strain {retry:g} is not above solver.strain_limit {limit:g}: '
+            f'a self-contact step that stretches springs past {retry:g} but within the '
+            'limit will be taken again in up to 14 smaller steps; set it above the limit '
+            '(the default 0.5) or to 0 to switch retries off')
+
+
 def step_with_retries(solver, state, control, dt, splits=SPLITS):
     """
     Advance ``state`` by ``dt``; if refused, again from the same start in n steps of dt/n.
