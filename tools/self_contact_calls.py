@@ -136,8 +136,8 @@ def plot(runs, size, path):
     """
     Chart each run's kernel time a step against the step, with issue 10's target.
 
-    ``runs``: ``[(edges, totals, first)]``; a step whose first detection found no pair
-    (layers apart) is drawn hollow.
+    ``runs``: ``[(edges, totals, first)]``; each run is a line, and the steps whose first
+    detection found pairs (layers in contact) are dots on it.
     """
     import matplotlib
     matplotlib.use('Agg')
