@@ -8,10 +8,14 @@ A recording made by ``sim_node`` (``rerun_path``) holds what built its simulatio
 (``replay/commands``; :mod:`hcloth_ros.simulation`). This builds the same simulation,
 applies the commands before the same steps, and compares each recorded finest mesh
 (every ``rerun_finest_every``-th step, float32 as recorded) with the replayed one. It
-prints the largest difference in metres: 0 for a recording made with the same version and
+prints the largest difference in metres: 0 for a recording made with the same engine and
 parameters, whatever the timing of the run was (which tick a message landed on is in the
-commands). ``--set`` re-simulates with a parameter changed (what would a stiffer cloth
-have done under the same commands?); the difference then says how far that moved it.
+commands). The engine is the package's sources that simulate and the Python, numpy and
+numba versions (:func:`~hcloth_ros.simulation.engine`): a recording keeps them, and the
+replay says on stderr which of them changed since (an edited kernel may move the cloth
+under the same version number). ``--set`` re-simulates with a parameter changed (what
+would a stiffer cloth have done under the same commands?); the difference then says how
+far that moved it.
 
 Exit status: 0 when the largest difference is at most ``--tolerance`` (default 0), 1 when
 above, 2 when the recording cannot be replayed (no start record, another format).
@@ -23,7 +27,7 @@ import sys
 import time
 
 from hcloth_ros import params
-from hcloth_ros.simulation import FORMAT, Simulation, version
+from hcloth_ros.simulation import engine_changes, FORMAT, Simulation, version
 import numpy as np
 import yaml
 
@@ -128,7 +132,8 @@ def compare(path, settings=None, progress=True):
 
     Keys: ``meshes`` compared, ``steps`` simulated, ``simulated`` seconds, ``largest``
     difference (m; inf where a mesh's level differs), ``at`` (step, point) of it,
-    ``version`` the recording was made with.
+    ``version`` the recording was made with, ``engine`` its
+    :func:`~hcloth_ros.simulation.engine` (None in recordings made before they kept it).
     """
     start, commands = read_commands(path)
     replay = Replay(start, commands, settings)
@@ -153,7 +158,8 @@ def compare(path, settings=None, progress=True):
                   f'difference so far {largest:.3g} m', file=sys.stderr, flush=True)
             last_said = time.monotonic()
     return {'meshes': meshes, 'steps': replay.step + 1, 'simulated': replay.sim.state.time,
-            'largest': largest, 'at': at, 'version': start.get('version')}
+            'largest': largest, 'at': at, 'version': start.get('version'),
+            'engine': start.get('engine')}
 
 
 def describe(outcome):
@@ -185,6 +191,10 @@ def main(argv=None):
     if outcome['version'] != version():
         print(f'[replay] recorded with hcloth_ros {outcome["version"]}, replayed with '
               f'{version()}: differences may come from the versions', file=sys.stderr)
+    changes = engine_changes(outcome['engine'])
+    if changes:
+        print(f'[replay] the engine changed since the recording ({"; ".join(changes)}): '
+              'differences may come from that', file=sys.stderr)
     print(f'[replay] {describe(outcome)}; {time.monotonic() - t0:.1f} s')
     return 0 if outcome['largest'] <= args.tolerance else 1
 

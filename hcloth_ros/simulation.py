@@ -20,7 +20,11 @@ ticks, which re-simulates the run bit for bit. ``R`` is a rotation matrix (three
 * ``['reset']``: the initial state and time 0, nothing held, obstacles at rest.
 """
 
+import functools
+import hashlib
 from importlib import metadata
+import pathlib
+import platform
 
 from hcloth_ros import params
 from hcloth_ros.core.recovery import step_with_retries
@@ -33,12 +37,72 @@ SETTINGS = ('solver.dt', 'solver.substeps', 'solver.contact_rounds', 'solver.str
             'solver.retry_strain')
 
 
+# The package's sources a replay runs (the core, and what turns commands and parameters
+# into its calls), relative to the package: a change to one of them may change the motion,
+# which the package's version number does not say (it stays while the code changes).
+ENGINE_SOURCES = ('core', 'simulation.py', 'params.py', 'obstacles.py', 'grippers.py')
+# The libraries whose versions may change the motion's last bits.
+ENGINE_LIBRARIES = ('numpy', 'numba')
+
+
 def version():
     """Return the installed version of hcloth_ros ('unknown' outside an install)."""
     try:
         return metadata.version('hcloth_ros')
     except metadata.PackageNotFoundError:
         return 'unknown'
+
+
+def source_digest(package):
+    """
+    Return the first 12 hex digits of a SHA-256 of the ``ENGINE_SOURCES`` under ``package``.
+
+    Over each ``.py`` file's path (relative to ``package``, in sorted order) and bytes, so a
+    file's edit, a new file or a renamed one changes it; compiled caches do not.
+    """
+    root = pathlib.Path(package)
+    files = []
+    for name in ENGINE_SOURCES:
+        path = root / name
+        files.extend(sorted(path.rglob('*.py')) if path.is_dir() else [path])
+    digest = hashlib.sha256()
+    for path in files:
+        digest.update(path.relative_to(root).as_posix().encode() + b'\0')
+        digest.update(path.read_bytes() + b'\0')
+    return digest.hexdigest()[:12]
+
+
+@functools.lru_cache(maxsize=1)
+def engine():
+    """
+    Return what besides the parameters and commands decides a run's motion, as a dict.
+
+    ``source``: :func:`source_digest` of this installed package; the Python, numpy and
+    numba versions. A recording keeps it (:meth:`Simulation.start_record`) so that a
+    replay can say which of them changed since (:func:`engine_changes`).
+    """
+    out = {'source': source_digest(pathlib.Path(__file__).parent),
+           'python': platform.python_version()}
+    for name in ENGINE_LIBRARIES:
+        try:
+            out[name] = metadata.version(name)
+        except metadata.PackageNotFoundError:
+            out[name] = 'unknown'
+    return out
+
+
+def engine_changes(recorded):
+    """
+    Return how this engine differs from a recording's (:func:`engine`), one text a change.
+
+    ``recorded`` None (a recording made before recordings kept it): one text saying so.
+    """
+    if recorded is None:
+        return ['the recording does not say which engine made it (made before recordings '
+                'kept the source digest)']
+    now = engine()
+    return [f'{name} {recorded.get(name, "unknown")} -> {value}'
+            for name, value in now.items() if recorded.get(name) != value]
 
 
 def plain(value):
@@ -81,7 +145,8 @@ class Simulation:
 
     def start_record(self):
         """Return what :mod:`hcloth_ros.replay` needs to build this simulation again."""
-        return {'format': FORMAT, 'version': version(), 'values': self.values,
+        return {'format': FORMAT, 'version': version(), 'engine': engine(),
+                'values': self.values,
                 'moving_obstacles': self.moving_obstacles}
 
     def apply(self, command):

@@ -1,10 +1,12 @@
 """Exact replay: a recording holds every command with its step; hcloth_replay re-simulates it."""
 
 import json
+import pathlib
+import shutil
 import time
 
 from geometry_msgs.msg import PoseStamped
-from hcloth_ros import params, replay
+from hcloth_ros import params, replay, simulation
 from hcloth_ros.core.poses import pose_fields
 from hcloth_ros.node import ClothSimNode
 from hcloth_ros.recorder import Recorder
@@ -160,6 +162,76 @@ def test_a_recording_without_commands_is_refused_in_one_line(tmp_path, capsys):
     assert len(err) == 1 and 'no replay/start' in err[0]
     assert replay.main([path, '--set', 'cloth.k_struct=-1']) == 2
     assert 'out of range' in capsys.readouterr().err
+
+
+def test_the_source_digest_follows_the_engine_sources_and_only_them(tmp_path):
+    """
+    A copy of the package digests as the installed one.
+
+    An edit to a kernel or a new core file changes the digest, an edit to a benchmark
+    (not run by a replay) does not.
+    """
+    package = pathlib.Path(simulation.__file__).parent
+    copy = tmp_path / 'hcloth_ros'
+    shutil.copytree(package, copy, ignore=shutil.ignore_patterns('__pycache__'))
+    same = simulation.source_digest(copy)
+    assert same == simulation.engine()['source'] and len(same) == 12
+    kernel = copy / 'core' / 'kernels' / 'self_contact.py'
+    text = kernel.read_text()
+    kernel.write_text(text.replace('RING = 2', 'RING = 3'))
+    assert simulation.source_digest(copy) != same
+    kernel.write_text(text)
+    assert simulation.source_digest(copy) == same
+    (copy / 'bench' / 'report.py').write_text('# edited\n')
+    assert simulation.source_digest(copy) == same
+    (copy / 'core' / 'extra.py').write_text('\n')
+    assert simulation.source_digest(copy) != same
+
+
+def _short_recording(path, engine):
+    """Record 6 steps of the default scene with ``engine`` as the start record's (None: none)."""
+    sim = Simulation.build(params.resolve())
+    record = sim.start_record()
+    if engine is None:
+        del record['engine']
+    else:
+        record['engine'] = engine
+    recorder = Recorder(sim.model, path=path, finest_every=2)
+    recorder.log_start(record, 1)
+    for _ in range(6):
+        commands = sim.take_commands()
+        report = sim.advance()
+        recorder.log_step(sim.state, sim.solver.levels()[-1], 1, report, 0.001, sim.dt,
+                          commands=commands)
+    recorder.close()
+
+
+def test_a_replay_says_which_part_of_the_engine_changed_since_the_recording(tmp_path, capsys):
+    """
+    The start record keeps the engine (sources' digest, Python, numpy and numba versions).
+
+    Replayed by the same engine: nothing said. A recording whose start says another source
+    digest and numba: one line on stderr naming both, the recorded and the present values.
+    One made before recordings kept it: one line saying the engine is unknown.
+    """
+    now = simulation.engine()
+    assert set(now) == {'source', 'python', 'numpy', 'numba'}
+    assert Simulation.build(params.resolve()).start_record()['engine'] == now
+    cases = {'same': now, 'other': {**now, 'source': '0123456789ab', 'numba': '0.0'},
+             'none': None}
+    said = {}
+    for name, engine in cases.items():
+        path = str(tmp_path / f'{name}.rrd')
+        _short_recording(path, engine)
+        assert replay.main([path]) == 0     # the same motion: the same code ran it
+        said[name] = [line for line in capsys.readouterr().err.splitlines()
+                      if 'engine' in line]
+    assert said['same'] == []
+    assert len(said['other']) == 1
+    assert f"source 0123456789ab -> {now['source']}" in said['other'][0]
+    assert f"numba 0.0 -> {now['numba']}" in said['other'][0]
+    assert 'python' not in said['other'][0] and 'numpy' not in said['other'][0]
+    assert len(said['none']) == 1 and 'does not say which engine' in said['none'][0]
 
 
 def test_start_record_reads_back_as_the_same_values(tmp_path):
