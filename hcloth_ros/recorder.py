@@ -7,7 +7,8 @@ Entities: ``cloth/finest`` (mesh of the finest simulated level, every
 ``scene/*`` (the ground, boxes and spheres when they change, the moving obstacles when they
 move) and ``metrics/*`` scalars (:data:`METRICS`), one per step unless said otherwise:
 
-* ``step_ms``: the solver's last step (its report's ``seconds``), in ms;
+* ``step_ms``: the compute of the tick's steps, in ms (its report's ``seconds``: the
+  substeps and every try of a retried step, :func:`~hcloth_ros.core.solvers.merged`);
 * ``headroom``: simulated seconds per second of the tick's compute, ``simulated_seconds /
   wall_seconds`` as passed in (the node: its tick up to the recorder): above 1 the step
   is faster than real time (2: it could run twice as fast), below 1 a node paced at real
@@ -16,7 +17,9 @@ move) and ``metrics/*`` scalars (:data:`METRICS`), one per step unless said othe
   (``time.monotonic()``) between this ``log_step`` call and the previous one: 1.0 when
   the node keeps real time, whatever its headroom (a pause shows as one low value). The
   first call has no previous one and logs no value;
-* ``levels``, ``max_strain``, ``energy``.
+* ``levels``, ``energy``; ``max_strain``: the largest finest strain after any of the
+  tick's steps (its report's ``peak_strain``: a strain reached at a substep or a retry's
+  smaller step and undone by the tick's end shows).
 
 For exact replay (:mod:`hcloth_ros.replay`): ``replay/start`` (static, a JSON text: what
 builds the simulation again, :meth:`~hcloth_ros.simulation.Simulation.start_record`) and
@@ -279,7 +282,7 @@ class Recorder:
         return {'step_ms': report.seconds * 1e3,
                 'headroom': simulated_seconds / wall_seconds if wall_seconds > 0 else None,
                 'real_time_factor': self._real_time_factor(simulated_seconds, now),
-                'levels': len(report.levels), 'max_strain': report.max_strain,
+                'levels': len(report.levels), 'max_strain': report.peak_strain,
                 'energy': kin + pot + ela}
 
     def _real_time_factor(self, simulated_seconds, now):

@@ -4,9 +4,12 @@ Contact across levels and recovery.
 A fold over a table edge, a cloth started inside a box, a step retried in smaller steps.
 """
 
+from conftest import load_tool
+from hcloth_ros import params
 from hcloth_ros.core import ClothBuilder, Control, make_scene, make_solver, Placement, State
 from hcloth_ros.core.kernels import contact_strain
 from hcloth_ros.core.recovery import retry_warning, step_with_retries
+from hcloth_ros.simulation import Simulation
 import numpy as np
 import pytest
 
@@ -363,6 +366,46 @@ def test_refused_steps_are_retried_in_smaller_steps():
     state, splits = run(True)
     assert state.time == pytest.approx(2.0) and 0 not in splits and max(splits) > 1
     assert np.all(np.isfinite(state.q[0]))
+
+
+def _reports_of(solver):
+    """Wrap ``solver.step`` to keep the report of every call; return the list."""
+    reports, inner = [], solver.step
+
+    def step(*args, **kwargs):
+        report = inner(*args, **kwargs)
+        reports.append((report.ok, report.max_strain, report.seconds))
+        return report
+    solver.step = step
+    return reports
+
+
+def test_a_ticks_report_holds_its_largest_strain_and_all_its_time():
+    """
+    A report for several steps: the last one's, its largest strain, every try's time.
+
+    The thrown fold (``tools/thrown_fold.py``) as the node steps it: the whole step is
+    refused, the two half steps go through, the first at 0.36 and the second at 0.22
+    (2026-11-30): ``max_strain`` is the end's and ``peak_strain`` the first half's, which
+    the tick's report showed nowhere before; ``seconds`` holds the refused try's time too.
+    A tick of four substeps (``Simulation.advance``) reports the same way.
+    """
+    model, state, solver = load_tool('thrown_fold').thrown(5.0, 0.5)
+    calls = _reports_of(solver)
+    report, taken = step_with_retries(solver, state, Control(model), 1.0 / 60.0)
+    assert taken == 2 and [ok for ok, _, _ in calls] == [False, True, True]
+    assert report.max_strain == calls[-1][1]
+    assert report.peak_strain == max(calls[1][1], calls[2][1]) > report.max_strain + 0.1
+    assert report.seconds == pytest.approx(sum(s for _, _, s in calls), rel=1e-12)
+    sim = Simulation.build(params.resolve({'solver.substeps': 4}))
+    calls = _reports_of(sim.solver)
+    for _ in range(5):
+        calls.clear()
+        report = sim.advance()
+        assert report.ok and len(calls) == 4
+        assert report.max_strain == calls[-1][1]
+        assert report.peak_strain == max(strain for _, strain, _ in calls)
+        assert report.seconds == pytest.approx(sum(s for _, _, s in calls), rel=1e-12)
 
 
 def test_retries_below_the_strain_limit_are_warned_of():

@@ -1007,8 +1007,9 @@ def test_a_step_of_layers_meeting_fast_is_taken_again_in_smaller_steps():
 
     Pushed apart a pair at a time, the crushed fold's springs end the step at 0.60; with
     ``retry_strain`` 0.5 the step is refused and taken as two half steps (the shorter the
-    step, the less each push stretches), at 0.22, within three times the strain limit,
-    and nothing crosses in either (figures: ``tools/thrown_fold.py``, 2026-11-30).
+    step, the less each push stretches), at 0.22 after the second (0.36 after the first),
+    within three times the strain limit at the end, and nothing crosses in either
+    (figures: ``tools/thrown_fold.py``, 2026-11-30).
     """
     strains = {}
     for retry in (None, 0.5):
@@ -1027,8 +1028,8 @@ def test_a_step_a_grasp_moves_is_retried_with_the_grasp_moving_evenly():
 
     Taken once the crushed fold's springs end at 1.05; retried, the grasp moves half its
     way in each of the two half steps (``Control.follow``), the speed the step asked, and
-    they end at 0.28, within the strain limit's 0.3, with the corner where it was sent
-    (figures: ``tools/thrown_fold.py``, 2026-11-30).
+    they end at 0.28 (0.32 after the first), within three times the strain limit, with
+    the corner where it was sent (figures: ``tools/thrown_fold.py``, 2026-11-30).
     """
     strains = {}
     for retry in (None, 0.5):

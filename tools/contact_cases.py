@@ -48,7 +48,7 @@ def inside(solver_name, options):
         points = state.points(2)
         if out is None and not np.all(np.abs(points - box[:3]) < box[3:], axis=1).any():
             out = (i + 1) * DT
-        strain[i // 60] = max(strain[i // 60], report.max_strain)
+        strain[i // 60] = max(strain[i // 60], report.peak_strain)
     print(f'{solver_name}: out after {out} s; largest strain {strain[0]:.2f} in the first '
           f'second, {strain[1]:.2f} in the second')
 

@@ -10,7 +10,8 @@ thread) lands in 45 steps; a grasp then takes its far 6 cm strip (both layers) a
 it 180 degrees about a line along y, 1 cm over the cloth's top at the middle, in
 ``--fold-steps`` steps; it lets go and 60 steps follow. After every step the finest
 level's edges through its own triangles are counted (``tools/intersections.py``: a
-tangle). Prints the steps with any, the largest finest strain (``strain_stats``) and the
+tangle). Prints the steps with any, the largest finest strain (after any step, a retry's
+smaller steps included: the reports' ``peak_strain``) and the
 highest point above the ground at the end; every 12 fold steps a progress line.
 ``--retries`` steps as the node does (``core.recovery.step_with_retries``: a refused step
 again in 2, 4 or 8 steps, and the node's ``solver.retry_strain`` unless ``--option`` sets
@@ -44,7 +45,6 @@ def main(argv=None):
     numba.set_num_threads(1)
     from hcloth_ros.bench.self_contact import perturb, scene_setup, second_fold
     from hcloth_ros.core import make_solver
-    from hcloth_ros.core.kernels import stats
     from hcloth_ros.core.recovery import step_with_retries
     from hcloth_ros.params import assignments, PARAM_BY_NAME
     from intersections import intersections
@@ -72,8 +72,7 @@ def main(argv=None):
             if not report.ok:
                 print(f'step {step} refused: {report.reason}', flush=True)
                 continue
-            largest = max(largest, stats.strain_stats(state.q[finest], state.qd[finest],
-                                                      model.level(finest).rest)[0])
+            largest = max(largest, report.peak_strain)
             count_now = intersections(state.q[finest])[0]
             if count_now:
                 tangled[step] = count_now

@@ -63,8 +63,8 @@ def main(argv=None):
                 if len(refused) > 3:
                     break
                 continue
-            largest = max(largest, report.max_strain)
-            over += report.max_strain > 0.2
+            largest = max(largest, report.peak_strain)    # a retry's smaller steps too
+            over += report.peak_strain > 0.2
             if args.intersections:
                 count = intersections(state.q[-1])[0]
                 if count:

@@ -15,6 +15,8 @@ speed the step asked of them (:meth:`Control.follow
 
 from contextlib import contextmanager
 
+from hcloth_ros.core.solvers import merged
+
 SPLITS = (2, 4, 8)
 
 
@@ -53,8 +55,10 @@ def step_with_retries(solver, state, control, dt, splits=SPLITS):
     """
     Advance ``state`` by ``dt``; if refused, again from the same start in n steps of dt/n.
 
-    n takes the values of ``splits`` in turn. Returns ``(report, n)``: the last report and
-    the steps it took (1: the first try went through; 0: every try was refused, and the
+    n takes the values of ``splits`` in turn. Returns ``(report, n)``: the last report
+    (:func:`~hcloth_ros.core.solvers.merged` over the n steps that went through: their
+    largest strain in ``peak_strain``; ``seconds`` the time of every try) and the steps it
+    took (1: the first try went through; 0: every try was refused, and the
     state, grasps and moving bodies are where they were; the report is the first refusal,
     or the last one if the first was only ``stretched``). A report after retries holds why
     the first try was refused in ``extra['refused']`` (its reason without "step refused,
@@ -69,18 +73,25 @@ def step_with_retries(solver, state, control, dt, splits=SPLITS):
     if report.ok:
         return report, 1
     refused, start, plan, kept = report, state.copy(), control.plan(), solver.checkpoint()
+    spent = report.seconds
     for n in splits:
         with _stretch_allowed(solver, n == splits[-1]):
+            taken = []
             for i in range(1, n + 1):
                 control.follow(plan, i / n)
                 report = solver.step(state, control, dt / n)
+                spent += report.seconds
                 if not report.ok:
                     state.assign(start)
                     control.rewind(plan)
                     solver.restore(kept)
                     break
+                taken.append(report)
             else:
+                report = merged(taken, spent)
                 report.extra['refused'] = refused.reason.split(': step refused')[0]
                 return report, n
     # a stretched first try was not what stopped the last, which ran without that check
-    return (report if refused.stretched else refused), 0
+    report = report if refused.stretched else refused
+    report.seconds = spent
+    return report, 0

@@ -60,7 +60,10 @@ class StepReport:
 
     ``ok`` is False when the step was refused (``reason`` says why) and the state was left
     as it was. ``max_strain``/``mean_strain`` are relative stretch of structural and shear
-    springs on the finest simulated level after the step (0.1 = 10 %).
+    springs on the finest simulated level after the step (0.1 = 10 %). A report of several
+    steps taken in turn (:func:`merged`: a retry's smaller steps, a tick's substeps) is
+    the last one's, but ``peak_strain`` is the largest ``max_strain`` after any of them,
+    ``seconds`` and the iterations are their sums.
     """
 
     ok: bool
@@ -76,6 +79,30 @@ class StepReport:
     # refused only because it stretched a spring past ``retry_strain`` (Solver): smaller
     # steps may not (core.recovery)
     stretched: bool = False
+    # the largest max_strain of the accepted steps it stands for (None: this step's own)
+    peak_strain: float = None
+
+    def __post_init__(self):
+        if self.peak_strain is None:
+            self.peak_strain = self.max_strain if self.ok else 0.0
+
+
+def merged(reports, seconds=None):
+    """
+    Return one report for ``reports``, steps taken in turn (the last may be a refusal).
+
+    The last report, with ``peak_strain`` the largest of the accepted ones' (a strain
+    reached between them and undone by the end is otherwise not seen), the iterations
+    summed, ``converged`` only if all were, and ``seconds`` the given time (the tries a
+    retry threw away included) or the reports' sum.
+    """
+    out = reports[-1]
+    out.peak_strain = max((r.peak_strain for r in reports if r.ok), default=0.0)
+    out.seconds = sum(r.seconds for r in reports) if seconds is None else seconds
+    out.newton_iterations = sum(r.newton_iterations for r in reports)
+    out.cg_iterations = sum(r.cg_iterations for r in reports)
+    out.converged = all(r.converged for r in reports)
+    return out
 
 
 class Solver:

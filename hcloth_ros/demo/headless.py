@@ -42,11 +42,11 @@ def simulate(values, seconds, snapshot_times, progress=True):
             print(f'[demo] step {i}: {report.extra["refused"]}; retried as {taken} steps')
         curves['t'].append(state.time)
         curves['com_z'].append(centre_of_mass(model, state, finest)[2])
-        curves['max_strain'].append(report.max_strain)
+        curves['max_strain'].append(report.peak_strain)
         curves['step_ms'].append(seconds * 1e3)
         if progress and (i + 1) % max(1, steps // 10) == 0:
             print(f'[demo] {100 * (i + 1) // steps:3d} %  t = {state.time:5.2f} s  '
-                  f'step {seconds * 1e3:6.2f} ms  max strain {report.max_strain:.3f}',
+                  f'step {seconds * 1e3:6.2f} ms  max strain {report.peak_strain:.3f}',
                   flush=True)
     return model, shots, {k: np.asarray(v) for k, v in curves.items()}
 
