@@ -19,7 +19,8 @@ move) and ``metrics/*`` scalars (:data:`METRICS`), one per step unless said othe
   first call has no previous one and logs no value;
 * ``levels``, ``energy``; ``max_strain``: the largest finest strain after any of the
   tick's steps (its report's ``peak_strain``: a strain reached at a substep or a retry's
-  smaller step and undone by the tick's end shows).
+  smaller step and undone by the tick's end shows), or the strain that got its last step
+  refused if that is larger (the refused state itself is not kept).
 
 For exact replay (:mod:`hcloth_ros.replay`): ``replay/start`` (static, a JSON text: what
 builds the simulation again, :meth:`~hcloth_ros.simulation.Simulation.start_record`) and
@@ -282,7 +283,8 @@ class Recorder:
         return {'step_ms': report.seconds * 1e3,
                 'headroom': simulated_seconds / wall_seconds if wall_seconds > 0 else None,
                 'real_time_factor': self._real_time_factor(simulated_seconds, now),
-                'levels': len(report.levels), 'max_strain': report.peak_strain,
+                'levels': len(report.levels),
+                'max_strain': max(report.peak_strain, report.max_strain),
                 'energy': kin + pot + ela}
 
     def _real_time_factor(self, simulated_seconds, now):

@@ -210,3 +210,28 @@ def test_real_time_factor_is_simulated_over_wall_seconds_between_calls(tmp_path,
     assert np.allclose(values, [5 / 6, 4 / 3, 1 / 3, 1 / 2], rtol=1e-9)
     # the headroom of the same steps: DT over the 4 ms passed in, whatever the wall clock
     assert np.allclose(_series(path, 'headroom')[1], 25 / 6, rtol=1e-12)
+
+
+def test_a_ticks_largest_strain_and_time_are_recorded_not_its_last_steps(tmp_path):
+    """
+    ``max_strain`` and ``step_ms`` of a tick of several steps (a retry, substeps).
+
+    Recorded: the largest strain after any of its steps and all of their time; for a tick
+    whose last step was refused, the strain that got it refused if larger (a runaway).
+    """
+    from hcloth_ros.core.solvers import merged, StepReport
+    path = str(tmp_path / 'tick.rrd')
+    model, solver, state, control = _scene()
+    rec = recorder.Recorder(model, path=path)
+    ticks = [merged([StepReport(True, max_strain=0.36, seconds=0.002),
+                     StepReport(True, max_strain=0.22, seconds=0.003)]),
+             merged([StepReport(True, max_strain=0.12, seconds=0.001),
+                     StepReport(False, 'runaway strain 11.5', max_strain=11.5,
+                                seconds=0.004)])]
+    for report in ticks:
+        state.time += DT
+        rec.log_step(state, FINEST, LOD, report, 0.01, DT)
+    rec.close()
+    assert ticks[0].max_strain == 0.22 and ticks[0].peak_strain == 0.36
+    np.testing.assert_allclose(_series(path, 'max_strain')[1], [0.36, 11.5])
+    np.testing.assert_allclose(_series(path, 'step_ms')[1], [5.0, 5.0])
