@@ -44,8 +44,8 @@ an obstacle moves.
 Bad input (non-finite poses, wrong frames, commands before any pose) is logged, throttled,
 and dropped; the simulation goes on. A step refused for blow-up, or for stretching a
 spring past ``solver.retry_strain`` from a start within it while self-contact found
-pairs and no grasp or moving body moved the cloth, is retried in 2, 4 and 8 smaller steps
-and the node says so. ``cloth/reset``
+pairs, is retried in 2, 4 and 8 smaller steps (grasps and moving bodies moving evenly
+over them) and the node says so. ``cloth/reset``
 (``std_srvs/Trigger``) returns the cloth to its initial state and releases every grasp.
 ``pinned_points``, the static obstacles (``scene.*``: a cloth inside a new obstacle is
 pushed out over a few steps) and the solver's step parameters may change at runtime; cloth

@@ -40,9 +40,9 @@ def test_fold_demo_folds_the_cloth_and_leaves_a_recording(tmp_path, monkeypatch)
     # (y > 0.3) on the ground, so the cloth is doubled over: its y extent has halved.
     # The fold measures (demo/fold_metrics.py) against issue 10's targets: none of the
     # top layer below the bottom one, the far edge moved at most 2 cm, the crease within
-    # 2 cm of the middle, where the client folds (six runs of the demo: 0, 0.0-0.2 cm and
-    # 1.6 cm; tools/fold_jitter.py, the engine with the node's command timing at random:
-    # 0, 0.0-0.2 cm, 1.5-1.8 cm in 24 runs).
+    # 2 cm of the middle, where the client folds (four runs of the demo on 2026-11-30: 0,
+    # 0.0 cm and 1.7-1.8 cm; tools/fold_jitter.py, the engine with the node's command
+    # timing at random: 0, 0.0 cm, 1.7-1.9 cm in 24 runs; README, "The fold demo").
     import random
     import sys
 
@@ -60,8 +60,8 @@ def test_fold_demo_folds_the_cloth_and_leaves_a_recording(tmp_path, monkeypatch)
         if chunk.entity_path == '/cloth/finest' and \
                 'Mesh3D:vertex_positions' in batch.schema.names:
             last = batch.column('Mesh3D:vertex_positions').to_pylist()[-1]
-    # the governor may have simulated fewer levels on a busy machine: any level is a
-    # square grid of the same cloth
+    # the scene turns the governor off (65 x 65 throughout), but any level is a square
+    # grid of the same cloth: the side is read from the mesh
     points = np.array(last)
     side = int(round(np.sqrt(len(points))))
     grid = points.reshape(side, side, 3)

@@ -10,8 +10,9 @@ over the bottom one), self-contact 5 mm, ``multigrid``; its top layer is thrown 
 (m) in the same step. For each case it prints the largest finest strain after the step
 taken whole, and as the node takes it (``core.recovery.step_with_retries`` with
 ``retry_strain`` 0.5): how many steps that took, the largest strain after any of them
-(the report's ``peak_strain``) and after the last. ``test_self_contact.py``'s retry
-tests run this scene (:func:`thrown`).
+(the report's ``peak_strain``) and after the last, and the finest level's edges through
+its own triangles after the step (``tools/intersections.py``: a tangle). One numba
+thread. ``test_self_contact.py``'s retry tests run this scene (:func:`thrown`).
 """
 
 import argparse
@@ -42,8 +43,8 @@ def one_step(speed, lift, retry_strain):
     """
     Take the thrown fold's step (a bottom corner lifted ``lift`` m).
 
-    Returns ``(peak, end, steps)``: the largest finest strain after any of the steps taken,
-    after the last, and how many there were.
+    Returns ``(peak, end, steps, q)``: the largest finest strain after any of the steps
+    taken, after the last, how many there were, and the finest level's positions after.
     """
     model, state, solver = thrown(speed, retry_strain)
     control = Control(model)
@@ -54,7 +55,7 @@ def one_step(speed, lift, retry_strain):
     report, taken = step_with_retries(solver, state, control, H)
     if not report.ok:
         raise RuntimeError(f'the step was refused: {report.reason}')
-    return report.peak_strain, report.max_strain, taken
+    return report.peak_strain, report.max_strain, taken, state.q[model.level_count - 1]
 
 
 def main(argv=None):
@@ -63,12 +64,16 @@ def main(argv=None):
     parser.add_argument('--lifts', default='0,0.05,0.2',
                         help='m, a bottom corner lifted in the step (0: none)')
     args = parser.parse_args(argv)
+    import numba
+    from intersections import intersections
+    numba.set_num_threads(1)
     for lift in (float(v) for v in args.lifts.split(',')):
-        _, whole, _ = one_step(args.speed, lift, None)
-        peak, end, taken = one_step(args.speed, lift, RETRY_STRAIN)
+        _, whole, _, q_whole = one_step(args.speed, lift, None)
+        peak, end, taken, q = one_step(args.speed, lift, RETRY_STRAIN)
         print(f'thrown at {args.speed:g} m/s, corner lifted {lift * 100:g} cm: largest strain '
               f'{whole:.3f} in one step; retried as {taken} steps, {peak:.3f} at the most and '
-              f'{end:.3f} after the last', flush=True)
+              f'{end:.3f} after the last; edges through triangles after: '
+              f'{intersections(q_whole)[0]} and {intersections(q)[0]}', flush=True)
 
 
 if __name__ == '__main__':

@@ -127,10 +127,11 @@ class Solver:
         none was is refused too, marked ``stretched``, so that
         :func:`~hcloth_ros.core.recovery.step_with_retries` takes it again in smaller steps
         (the 65 x 65 folded cloth's top layer thrown at 5 m/s onto the bottom one, pushed
-        apart a pair at a time, ends its step at 0.55; retried as two half steps, 0.20:
-        the README); None: off. Not retried: a start already stretched beyond it (two
-        grippers pulling the cloth taut) and a step without self-contact pairs (a flood of
-        far gripper poses took 15 steps a tick). Grasps and moving bodies move evenly over
+        apart a pair at a time, ends its step at 0.60; retried as two half steps, 0.36
+        after the first and 0.22 after the second: ``tools/thrown_fold.py``); None: off.
+        Not retried: a start already stretched beyond it (two grippers pulling the cloth
+        taut) and a step without self-contact pairs (a flood of far gripper poses took 15
+        steps a tick). Grasps and moving bodies move evenly over
         the smaller steps (:meth:`Control.follow <hcloth_ros.core.control.Control.follow>`).
     :param builds: ``'serial'`` or ``'parallel'`` kernel builds on every level (or a kernel
         set with their names), or None: the parallel builds on levels large enough to
