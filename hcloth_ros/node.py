@@ -752,9 +752,15 @@ class ClothSimNode(Node):
         self.get_logger().error(f'publishing failed: {error}', throttle_duration_sec=1.0)
 
     def _report_retry(self, report, steps):
-        """Say what recovery did: n smaller steps went through, or none did."""
-        if steps:
-            ms = self.sim.dt * 1e3
+        """Say what recovery did: n smaller steps went through, the whole step, or none."""
+        ms = self.sim.dt * 1e3
+        if steps == 1:
+            self.get_logger().warning(
+                f'step of {ms:.2f} ms refused ({report.extra["refused"]}); the smallest '
+                f'retried steps stretched the springs further '
+                f'({report.extra["smaller_strain"]:.3g}): '
+                f'taken whole after all ({report.max_strain:.3g})', throttle_duration_sec=1.0)
+        elif steps:
             self.get_logger().warning(
                 f'step of {ms:.2f} ms refused ({report.extra["refused"]}); '
                 f'retried as {steps} steps of {ms / steps:.2f} ms: went through',

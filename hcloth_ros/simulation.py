@@ -167,7 +167,8 @@ class Simulation:
         """
         Run one tick: ``substeps`` steps of ``dt``, each retried in smaller steps if refused.
 
-        ``on_retry(report, steps)`` hears of a step that needed retries; the tick stops at
+        ``on_retry(report, steps)`` hears of a step that needed retries (``steps`` 1: taken
+        whole after all, see ``core.recovery.step_with_retries``); the tick stops at
         a step no retry got through. Grasp and body poses set before the tick are reached
         at its end, evenly over its steps (``Control.follow``). Returns the last step's
         report, merged over the tick's steps (``core.solvers.merged``: ``peak_strain`` the
@@ -180,7 +181,7 @@ class Simulation:
                 self.control.follow(plan, i / self.substeps)
             report, steps = step_with_retries(self.solver, self.state, self.control, self.dt)
             reports.append(report)
-            if steps != 1 and on_retry is not None:
+            if (steps != 1 or 'refused' in report.extra) and on_retry is not None:
                 on_retry(report, steps)
             if not report.ok:
                 break

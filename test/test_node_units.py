@@ -483,3 +483,22 @@ def test_a_tick_of_substeps_reaches_the_poses_asked_evenly_and_a_stopped_tick_ke
     (_, start), (_, end) = sim.control.plan().grasps['g']
     assert start.tolist() == pytest.approx([0.0, 0.0, 0.02], abs=1e-15)
     assert end.tolist() == [0.0, 0.0, 0.08]
+
+
+def test_a_step_taken_whole_after_its_retries_is_logged_with_both_strains():
+    """``_report_retry`` for n = 1 (core.recovery took the whole step after all)."""
+    import types
+    from hcloth_ros.core.solvers import StepReport
+    from hcloth_ros.node import ClothSimNode
+    said = []
+    logger = types.SimpleNamespace(warning=lambda text, **_: said.append(('warning', text)),
+                                   error=lambda text, **_: said.append(('error', text)))
+    node = types.SimpleNamespace(sim=types.SimpleNamespace(dt=1 / 60),
+                                 get_logger=lambda: logger)
+    report = StepReport(True, max_strain=0.603,
+                        extra={'refused': 'strain 0.603 > retry_strain 0.5 on level 1 '
+                                          '(from 0.0623)', 'smaller_strain': 1.358})
+    ClothSimNode._report_retry(node, report, 1)
+    assert len(said) == 1 and said[0][0] == 'warning'
+    assert 'strain 0.603 > retry_strain 0.5' in said[0][1]
+    assert '(1.36)' in said[0][1] and 'taken whole after all (0.603)' in said[0][1]

@@ -254,6 +254,27 @@ class MultigridSolver(HierarchicalSolver):
             self._hierarchies[top] = _Hierarchy(self.model, top)
         return self._hierarchies[top]
 
+    def checkpoint(self):
+        """
+        Return what :meth:`restore` needs: self-contact's memory and BDF2's history.
+
+        With the history back, a step taken again from the same state is the same step
+        (``core.recovery`` takes a refused step whole after all when its smallest retries
+        stretched the cloth further: without it that step ran as backward Euler, the
+        history being of the smaller steps undone).
+        """
+        top = self.solved_level()
+        return (super().checkpoint(), top, self._history_key,
+                tuple(a.copy() for a in self._previous[top] + self._current[top]))
+
+    def restore(self, checkpoint):
+        """Undo the steps committed since ``checkpoint`` (state: the caller's)."""
+        base, top, key, arrays = checkpoint
+        super().restore(base)
+        self._history_key = key
+        for kept, now in zip(arrays, self._previous[top] + self._current[top]):
+            np.copyto(now, kept)
+
     def _has_history(self, state, key, top):
         """Whether the last accepted step of this solver led to ``state`` (BDF2 may go on)."""
         return (self._history_key == key and np.array_equal(self._current[top][0], state.q[top])
