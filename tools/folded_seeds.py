@@ -54,8 +54,8 @@ def main(argv=None):
         for step in range(1, args.steps + 1):
             if args.retries:
                 report, taken = step_with_retries(solver, state, control, 1 / 60)
-                if taken > 1:
-                    retried.append(step)
+                if taken > 1 or (taken == 1 and 'refused' in report.extra):
+                    retried.append(step)    # (1: taken whole after its retries)
             else:
                 report = solver.step(state, control, 1 / 60)
             if not report.ok:
