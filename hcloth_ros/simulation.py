@@ -27,7 +27,7 @@ import pathlib
 import platform
 
 from hcloth_ros import params
-from hcloth_ros.core.recovery import step_with_retries
+from hcloth_ros.core.recovery import retried, step_with_retries
 from hcloth_ros.core.solvers import merged
 from hcloth_ros.obstacles import ObstacleBank
 import numpy as np
@@ -181,7 +181,7 @@ class Simulation:
                 self.control.follow(plan, i / self.substeps)
             report, steps = step_with_retries(self.solver, self.state, self.control, self.dt)
             reports.append(report)
-            if (steps != 1 or 'refused' in report.extra) and on_retry is not None:
+            if retried(report, steps) and on_retry is not None:
                 on_retry(report, steps)
             if not report.ok:
                 break

@@ -8,7 +8,7 @@ from conftest import load_tool
 from hcloth_ros import params
 from hcloth_ros.core import ClothBuilder, Control, make_scene, make_solver, Placement, State
 from hcloth_ros.core.kernels import contact_strain
-from hcloth_ros.core.recovery import retry_warning, step_with_retries
+from hcloth_ros.core.recovery import retried, retry_warning, step_with_retries
 from hcloth_ros.core.solvers import StepReport
 from hcloth_ros.simulation import Simulation
 import numpy as np
@@ -458,7 +458,7 @@ def test_a_step_whose_smallest_retries_stretch_further_is_taken_whole_after_all(
             [(True, smallest)] + [(True, 0.6)]
         solver, state = _Scripted(script), State.at_rest(model)
         report, taken = step_with_retries(solver, state, Control(model), DT)
-        assert report.ok and state.time == pytest.approx(DT)
+        assert report.ok and state.time == pytest.approx(DT) and retried(report, taken)
         if kept == 'whole':
             assert taken == 1 and report.max_strain == 0.6 and np.all(state.q[-1] == 0.6)
             assert report.extra['smaller_strain'] == 1.3
@@ -469,6 +469,8 @@ def test_a_step_whose_smallest_retries_stretch_further_is_taken_whole_after_all(
             assert taken == 8 and report.peak_strain == 0.45 and np.all(state.q[-1] == 0.45)
             assert 'smaller_strain' not in report.extra and len(solver.calls) == 11
         assert solver.retry_strain == 0.5
+    plain = step_with_retries(_Scripted([(True, 0.2)]), State.at_rest(model), Control(model), DT)
+    assert not retried(*plain)
 
 
 def test_the_multigrid_solver_takes_a_step_again_as_it_took_it_after_a_restore():

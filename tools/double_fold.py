@@ -46,7 +46,7 @@ def main(argv=None):
     numba.set_num_threads(1)
     from hcloth_ros.bench.self_contact import perturb, scene_setup, second_fold
     from hcloth_ros.core import make_solver
-    from hcloth_ros.core.recovery import step_with_retries
+    from hcloth_ros.core.recovery import retried as was_retried, step_with_retries
     from hcloth_ros.params import assignments, PARAM_BY_NAME
     from intersections import intersections
     thickness = None if args.thickness == 'none' else float(args.thickness)
@@ -66,7 +66,7 @@ def main(argv=None):
             step += 1
             if args.retries:
                 report, taken = step_with_retries(solver, state, control, 1 / 60)
-                if taken != 1 or 'refused' in report.extra:
+                if was_retried(report, taken):
                     retried[step] = taken   # 1: taken whole after its retries
             else:
                 report = solver.step(state, control, 1 / 60)

@@ -40,7 +40,7 @@ def main(argv=None):
     numba.set_num_threads(1)
     from hcloth_ros.bench.self_contact import perturb, scene_setup
     from hcloth_ros.core import make_solver
-    from hcloth_ros.core.recovery import step_with_retries
+    from hcloth_ros.core.recovery import retried as was_retried, step_with_retries
     from hcloth_ros.params import assignments, PARAM_BY_NAME
     from intersections import intersections
     options = dict({'thickness': 0.004}, **assignments(args.option))
@@ -54,8 +54,8 @@ def main(argv=None):
         for step in range(1, args.steps + 1):
             if args.retries:
                 report, taken = step_with_retries(solver, state, control, 1 / 60)
-                if taken > 1 or (taken == 1 and 'refused' in report.extra):
-                    retried.append(step)    # (1: taken whole after its retries)
+                if taken and was_retried(report, taken):   # (0: refused, listed there)
+                    retried.append(step)
             else:
                 report = solver.step(state, control, 1 / 60)
             if not report.ok:

@@ -101,6 +101,16 @@ def step_with_retries(solver, state, control, dt, splits=SPLITS):
     return report, 0
 
 
+def retried(report, taken):
+    """
+    Whether :func:`step_with_retries`, returning ``(report, taken)``, had to retry the step.
+
+    Smaller steps went through (``taken`` > 1), the whole step was taken after all (1,
+    with ``extra['refused']``), or none went through (0).
+    """
+    return taken != 1 or 'refused' in report.extra
+
+
 def _undo(solver, state, control, start, plan, kept):
     """Put state, grasps, bodies and the solver's memory back where the step started."""
     state.assign(start)
