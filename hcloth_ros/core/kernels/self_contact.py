@@ -49,8 +49,9 @@ it; the turns of a rolled-up border, kept apart, stretched its springs).
 Response (at the end positions; rounds of detection, each followed by ``RESOLVE_PASSES``
 Gauss-Seidel passes over its pairs, until a detection finds none, the last round moving
 points alone): the point and the triangle's vertices (weighted by the closest point's
-barycentric coordinates and inverse masses; held points do not move) move apart until
-they are ``(1 + SLACK)`` thicknesses apart. A crossed pair moves along the triangle's
+barycentric coordinates and inverse masses; held points do not move unless nothing else
+of the pair can, as when a grasp presses a layer into one lying on an obstacle) move apart
+until they are ``(1 + SLACK)`` thicknesses apart. A crossed pair moves along the triangle's
 normal to the side the point came from; a near one along the normal if the closest point
 is inside the triangle, else along the line from the closest point on the border to the
 point (so a point sliding over another layer's free edge is not flipped between the two
@@ -1588,6 +1589,14 @@ def _free_mass(inv_mass, support, v, n, ahead):
     return 0.0 if _blocked(support, v, sign * n[0], sign * n[1], sign * n[2]) else inv_mass[v]
 
 
+@numba.njit(**JIT)
+def _yield_mass(inv_mass, support, v, n, ahead):
+    """1 for a held vertex v (a grasp, a pin) with room along n (against it if not ``ahead``)."""
+    sign = 1.0 if ahead else -1.0
+    return 1.0 if inv_mass[v] == 0.0 and \
+        not _blocked(support, v, sign * n[0], sign * n[1], sign * n[2]) else 0.0
+
+
 @numba.njit(**INLINE)
 def _push(x1, qd, dv, inv_mass, support, verts, weights, ahead, nx, ny, nz, gap, one_side):
     """
@@ -1598,7 +1607,8 @@ def _push(x1, qd, dv, inv_mass, support, verts, weights, ahead, nx, ny, nz, gap,
     Velocities lose the sum's approach along n (inelastic: a push turned into velocity,
     push / h, made the layers bounce and stretched the cloth). A vertex resting on an
     obstacle does not move into it (its weight is zero for this push); ``one_side``:
-    only the first side moves (only the second if the first is held). A side pushed up
+    only the first side moves (only the second if the first is held). When nothing free
+    can move, the held vertices with room move instead, equally. A side pushed up
     off one that rests comes to rest (:func:`_come_to_rest`). Returns ``(lam, denom,
     inverse masses used)``; ``denom`` 0: nothing could move.
     """
@@ -1612,17 +1622,20 @@ def _push(x1, qd, dv, inv_mass, support, verts, weights, ahead, nx, ny, nz, gap,
         ims = (ims[0] if first > 0.0 else 0.0,
                ims[1] if (first > 0.0) == (ahead == 2) else 0.0,
                0.0 if first > 0.0 else ims[2], 0.0 if first > 0.0 else ims[3])
-    # no vertex moves further than the gap: with the point held (a pin, a grasp), a free
-    # vertex of small weight w alone would move gap / w (12 m once, on a 257 x 257 folded
-    # drop with points held); the pair is then only partly separated and the next pass
-    # goes on. With every point free it does not bind (masses within 4x of each other)
-    total, most = 0.0, 0.0
-    for m in range(4):
-        total += weights[m] * weights[m] * ims[m]
-        most = max(most, abs(weights[m]) * ims[m])
-    denom = max(total, most)
+    denom = _share(weights, ims)
     if not denom > 0.0:
-        return 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
+        # nothing free can move: a held point pressed into a layer that lies on an
+        # obstacle (a grasped corner put down on the cloth on the table). Held apart by
+        # neither side, the layers tangled (the fold with its 65 x 65 level solved, and a
+        # grasp lowered onto a folded cloth on the ground: 6-18 edges through triangles);
+        # the hold yields instead, and the grasp pulls it back next step
+        ims = (_yield_mass(inv_mass, support, verts[0], n_, 0 < ahead),
+               _yield_mass(inv_mass, support, verts[1], n_, 1 < ahead),
+               _yield_mass(inv_mass, support, verts[2], n_, False),
+               _yield_mass(inv_mass, support, verts[3], n_, False))
+        denom = _share(weights, ims)
+        if not denom > 0.0:
+            return 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
     lam = -gap / denom
     clipped = 0         # bit m: vertex m reached its obstacle
     for m in range(4):
@@ -1638,6 +1651,23 @@ def _push(x1, qd, dv, inv_mass, support, verts, weights, ahead, nx, ny, nz, gap,
         _come_to_rest(inv_mass, support, verts, weights, ims, ahead, nx, ny, nz)
     _inelastic(qd, verts, weights, ims, clipped, ahead, nx, ny, nz, dv)
     return lam, denom, ims[0], ims[1], ims[2], ims[3]
+
+
+@numba.njit(**INLINE)
+def _share(weights, ims):
+    """
+    Return a push's denominator: the weighted inverse masses, at least the largest one.
+
+    No vertex moves further than the gap: with the point held (a pin, a grasp), a free
+    vertex of small weight w alone would move gap / w (12 m once, on a 257 x 257 folded
+    drop with points held); the pair is then only partly separated and the next pass
+    goes on. With every point free it does not bind (masses within 4x of each other).
+    """
+    total, most = 0.0, 0.0
+    for m in range(4):
+        total += weights[m] * weights[m] * ims[m]
+        most = max(most, abs(weights[m]) * ims[m])
+    return max(total, most)
 
 
 @numba.njit(**INLINE)
@@ -1692,11 +1722,7 @@ def _inelastic(qd, verts, weights, ims, clipped, ahead, nx, ny, nz, dv):
         return
     shares = (0.0 if clipped & 1 else ims[0], 0.0 if clipped & 2 else ims[1],
               0.0 if clipped & 4 else ims[2], 0.0 if clipped & 8 else ims[3])
-    total, most = 0.0, 0.0      # as the push's (see _push)
-    for m in range(4):
-        total += weights[m] * weights[m] * shares[m]
-        most = max(most, abs(weights[m]) * shares[m])
-    denom = max(total, most)
+    denom = _share(weights, shares)
     if not denom > 0.0:
         return
     mu = -vn / denom
@@ -2237,8 +2263,9 @@ def _bear(x0, x1, qd, dv, inv_mass, support, p, t, side, up, thickness, friction
     Returns whether it pushed. See :func:`carry`. At the end of the step p is followed
     again from t (:func:`_track`: it may have slid onto the next triangle; past the
     layer's edge it falls freely). The push is self-contact's own (:func:`_push`: shared
-    by inverse masses, so a layer lying on a hanging layer weighs it down; held points and
-    points with no room left to their obstacle stay; inelastic), at p's projection
+    by inverse masses, so a layer lying on a hanging layer weighs it down; held points stay
+    unless nothing else can move, and so do points with no room left to their obstacle;
+    inelastic), at p's projection
     clipped into the triangle, along its normal, and so is the friction (:func:`_rub`, up
     to ``friction`` times the push: under a point that only fell onto it, Coulomb's law
     under its weight). A second push when the first left the pair short: a vertex of the
