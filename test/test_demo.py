@@ -4,6 +4,7 @@ import os
 
 from conftest import load_tool
 from hcloth_ros import params
+from hcloth_ros.demo import fold_client
 from hcloth_ros.demo import headless as demo
 import matplotlib.image as mpimg
 import numpy as np
@@ -98,9 +99,19 @@ def test_the_fold_in_the_engine_with_the_node_timing_meets_the_fold_targets():
     with the corners (``--translate-only --lift 0.25 --stop-short 0.01``, the path before;
     the demo failed a CI run on it); the same targets as the demo's.
     """
-    metrics = _fold_in_the_engine(17)
+    costs = []
+    metrics = _fold_in_the_engine(17, costs=costs)
     assert metrics['top_below'] == 0
     assert metrics['far_edge_moved'] <= 0.02 and metrics['fold_offset'] <= 0.02
+    # ``--contact-cost``'s figures: a tick after the first each, self-contact part of the
+    # tick; no pair while the corners rise (the layers apart), pairs in most ticks once
+    # the top layer lies on the bottom one (297-305 of 479 ticks, seeds 0 and 1)
+    kernel, pairs, tick = (np.array(c, dtype=float) for c in zip(*costs))
+    assert len(costs) == int(round((fold_client.DURATION + 4.0) * 60)) - 1
+    assert np.all(kernel > 0.0) and np.all(kernel < tick)
+    assert not pairs[:100].any() and np.count_nonzero(pairs) > 200
+    summary = load_tool('fold_jitter').cost_summary(costs)
+    assert f'{np.count_nonzero(pairs)} ticks whose first check found pairs' in summary
 
 
 def test_the_multigrid_solver_folds_the_cloth_without_tearing_it():
@@ -142,16 +153,17 @@ def test_a_level_shed_while_the_layers_meet_comes_back_without_crossing_them(she
     assert metrics['far_edge_moved'] <= 0.02 and metrics['fold_offset'] <= 0.02
 
 
-def _fold_in_the_engine(seed, overrides=None, shed=None, restore=None):
+def _fold_in_the_engine(seed, overrides=None, shed=None, restore=None, costs=None):
     """
     Fold measures of tools/fold_jitter.py's run of ``seed``.
 
     ``overrides``: parameter values; ``shed``, ``restore``: the ticks the finest level is
-    dropped and brought back.
+    dropped and brought back; ``costs``: a list for the run's self-contact times.
     """
     from hcloth_ros.demo.fold_metrics import fold_metrics
     jitter = load_tool('fold_jitter')
-    before, after = jitter.run(seed, overrides=overrides, shed=shed, restore=restore)
+    before, after = jitter.run(seed, overrides=overrides, shed=shed, restore=restore,
+                               costs=costs)
     side = int(round(np.sqrt(len(before))))
     metrics = fold_metrics(before.reshape(side, side, 3), after.reshape(side, side, 3))
     metrics['side'] = side      # the grid measured: the finest level simulated at the end

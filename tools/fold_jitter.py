@@ -7,6 +7,8 @@ The fold demo in the engine alone, with the node's command timing drawn at rando
     .venv/bin/python tools/fold_jitter.py --runs 8 -p solver.name=multigrid \
         -p solver.accurate_level=0
     .venv/bin/python tools/fold_jitter.py --runs 8 --shed 180 --restore 270
+    NUMBA_NUM_THREADS=1 .venv/bin/python tools/fold_jitter.py --runs 2 --contact-cost \
+        -p cloth.levels=3
 
 The demo's client samples its path at 30 Hz on the simulation's clock and its messages
 reach the node one or two ticks later, so which tick a command lands on varies from run
@@ -21,12 +23,17 @@ keeps the grippers from turning (the client before it turned them), ``-p NAME=VA
 overrides a parameter of the scene (a YAML value). ``--shed N --restore M`` drop the finest
 level at tick N and bring it back at tick M, as the node's governor does when ticks overrun
 (the restored level starts from the coarser state, the grippers re-take their points on it).
+``--contact-cost`` times self-contact's kernel calls and ``carry`` on the finest level each
+tick and prints their median over the ticks whose first check found pairs (the layers in
+contact), against the whole tick (``cloth.levels=3``: 129 x 129, issue 10's 16k points).
 """
 
 import argparse
+import contextlib
 import time
 
 from hcloth_ros import params
+from hcloth_ros.bench.self_contact import timed_carry, timed_kernel
 from hcloth_ros.demo import fold_client
 from hcloth_ros.demo.fold_metrics import describe, fold_metrics
 from hcloth_ros.grippers import GripperBank, points_within
@@ -54,18 +61,31 @@ def client_messages(t, starts, far_y, turn=True):
     return out
 
 
-def run(seed, turn=True, overrides=None, shed=None, restore=None):
+def run(seed, turn=True, overrides=None, shed=None, restore=None, costs=None):
     """
     Fold once with the timing drawn from ``seed``; return the grids before and after.
 
     ``overrides``: parameter values that replace the fold scene's; ``shed``, ``restore``:
     the ticks at which the finest level is dropped and brought back (None: never).
+    ``costs``: a list that gets, for each tick after the first (which compiles or loads
+    the kernels), self-contact's time on the finest level (its kernel calls and
+    ``carry``, ms), the pairs its first check found and the whole tick's time (ms).
     """
     rng = np.random.default_rng(seed)
     values = params.load_file(params.config_path('fold.yaml'))
     values.update(overrides or {})
     values = params.resolve(values)
     sim = Simulation.build(values)
+    k = sim.solver.levels()[-1]
+    kernel = [0.0]
+    if costs is not None:
+        timed_kernel(sim.solver, k, kernel)
+    with timed_carry(kernel) if costs is not None else contextlib.nullcontext():
+        return _fold(sim, rng, turn, shed, restore, kernel, costs)
+
+
+def _fold(sim, rng, turn, shed, restore, kernel, costs):
+    """Run :func:`run`'s fold on ``sim``; return the grids before and after."""
     k = sim.solver.levels()[-1]
     levels = {} if shed is None else {shed: k - 1}
     if restore is not None:
@@ -94,7 +114,12 @@ def run(seed, turn=True, overrides=None, shed=None, restore=None):
         bank.apply(sim.apply, lambda p: points_within(
             sim.state.points_by_id(sim.model, sim.solver.levels()[-1]), p, RADIUS),
             MAX_SPEED * sim.dt * sim.substeps)
-        sim.advance()
+        kernel[-1] = 0.0
+        start = time.perf_counter()
+        report = sim.advance()
+        if costs is not None and j > 0:
+            costs.append((1e3 * kernel[-1], report.extra.get('self_contact_pairs', 0),
+                          1e3 * (time.perf_counter() - start)))
     finest = sim.solver.levels()[-1]
     return before[finest], sim.state.points(finest).copy()
 
@@ -114,16 +139,36 @@ def main(argv=None):
                         help='a parameter override (YAML value), repeatable')
     parser.add_argument('--shed', type=int, help='drop the finest level at this tick')
     parser.add_argument('--restore', type=int, help='bring it back at this tick')
+    parser.add_argument('--contact-cost', action='store_true',
+                        help="time self-contact's kernel calls and carry each tick")
     args = parser.parse_args(argv)
     fold_client.LIFT, fold_client.SHORT = args.lift, args.stop_short
     overrides = params.overrides(args.param)
     for seed in range(args.seed, args.seed + args.runs):
         start = time.perf_counter()
-        before, after = run(seed, not args.translate_only, overrides, args.shed, args.restore)
+        costs = [] if args.contact_cost else None
+        before, after = run(seed, not args.translate_only, overrides, args.shed, args.restore,
+                            costs)
         side = int(round(np.sqrt(before.size / 3)))
         grids = (g.reshape(side, side, 3) for g in (before, after))
         print(f'seed {seed}: {describe(fold_metrics(*grids))} '
               f'({time.perf_counter() - start:.1f} s)', flush=True)
+        if costs:
+            print('    ' + cost_summary(costs), flush=True)
+
+
+def cost_summary(costs):
+    """Describe :func:`run`'s ``costs``: self-contact's time a tick where layers touch."""
+    kernel, pairs, tick = (np.array(c, dtype=float) for c in zip(*costs))
+    touching = kernel[pairs > 0]
+    where = (f'{len(touching)} ticks whose first check found pairs: median '
+             f'{np.median(touching):.2f} ms, 90th percentile '
+             f'{np.percentile(touching, 90):.2f} ms' if len(touching) else
+             'no tick found pairs')
+    share = 100 * kernel.sum() / tick.sum()
+    return (f'self-contact (kernel calls and carry, one thread) over the {len(kernel)} '
+            f'ticks: median {np.median(kernel):.2f} ms; {where}; the whole tick median '
+            f'{np.median(tick):.2f} ms, self-contact {share:.0f} % of the time of all ticks')
 
 
 if __name__ == '__main__':

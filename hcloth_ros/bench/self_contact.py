@@ -30,12 +30,14 @@ follows it.
 """
 
 import argparse
+import contextlib
 import json
 import os
 import time
 
 from hcloth_ros.bench.scenarios import build_model, prepare
 from hcloth_ros.core import Control, make_scene, make_solver, State
+from hcloth_ros.core import self_contact as self_contact_wrapper
 from hcloth_ros.core.self_contact import thickness_warning
 from hcloth_ros.params import assignments
 import numba
@@ -69,7 +71,7 @@ def folded(q, height, gap=GAP):
     return out
 
 
-def _timed_kernel(solver, level, times, kernel='self_contact'):
+def timed_kernel(solver, level, times, kernel='self_contact'):
     """Wrap one of a level's kernels (by name) to add its time to ``times[-1]``."""
     kit = solver.kernels(level)
     inner = getattr(kit, kernel)
@@ -86,6 +88,25 @@ def _timed_kernel(solver, level, times, kernel='self_contact'):
             return timed if name == kernel else getattr(kit, name)
 
     solver._kits[level] = Timed()
+
+
+@contextlib.contextmanager
+def timed_carry(times):
+    """Add the time of self-contact's ``carry`` (each step, before its checks) to ``times[-1]``."""
+    inner = self_contact_wrapper.carry
+
+    def timed(*args):
+        start = time.perf_counter()
+        try:
+            return inner(*args)
+        finally:
+            times[-1] += time.perf_counter() - start
+
+    self_contact_wrapper.carry = timed
+    try:
+        yield
+    finally:
+        self_contact_wrapper.carry = inner
 
 
 def scene_setup(n, scene):
@@ -166,7 +187,7 @@ def run(n, scene, steps, thickness, interval, rounds=16, extra=None):
     solver.step(state, control, 1 / 60)        # compile or load, first allocations
     kernel, totals, pairs, strain, refused = [], [], [0], 0.0, None
     if interval is not None or finger:
-        _timed_kernel(solver, finest, kernel, 'body_contact' if finger else 'self_contact')
+        timed_kernel(solver, finest, kernel, 'body_contact' if finger else 'self_contact')
     for i in range(steps):
         if finger:
             _move_finger(control, i + 1)
