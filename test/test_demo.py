@@ -85,6 +85,12 @@ def test_fold_measures_on_a_folded_grid_built_by_hand():
     metrics = fold_metrics(before, after)
     assert metrics['top_below'] == 0 and metrics['far_edge_moved'] == 0.0
     assert metrics['fold_line'] == pytest.approx(0.0) and metrics['fold_offset'] < 1e-12
+    # a flattened crease: a top-layer point on the ground in the bottom layer's
+    # footprint, 4 nm under it (129 x 129 folds), is level; 2 um under is through
+    after[15, 10, 1], after[15, 10, 2] = 0.49, 0.002 - 4e-9
+    assert fold_metrics(before, after)['top_below'] == 0
+    after[15, 10, 2] = 0.002 - 2e-6
+    assert fold_metrics(before, after)['top_below'] == 1
     after[:16, :, 2] = -0.004                      # sunk through the bottom layer
     after[-1, :, 1] += 0.03                         # and the far edge dragged 3 cm
     sunk = fold_metrics(before, after)

@@ -9,13 +9,14 @@ cloth's v axis, which the fold scene lays along +y):
 * ``top_below``: points of the top layer (the near half) lower than the bottom layer
   under them: the bottom layer's surface height at the point's x and y, interpolated in
   the bottom layer's triangle that lies under it (the highest, if several do), by more
-  than ``LEVEL`` (1 nm: a point level with it is not through it); top points over no
+  than ``LEVEL`` (1 um: a point level with it is not through it); top points over no
   bottom triangle do not count. 0 means no part of the top half went through the bottom
   half. (The height of the nearest bottom point instead counted top-layer edge points
-  lying beside a wrinkle of the bottom layer, up to 5 on a clean fold. Without ``LEVEL``
-  a top-layer point lying on the ground at a crease flattened there, 1 mm into the
-  footprint of the bottom layer's first cell, on the ground too, counted as below by
-  2e-13 m: the rounding of the interpolated height.)
+  lying beside a wrinkle of the bottom layer, up to 5 on a clean fold. A top-layer point
+  lying on the ground at a crease flattened there, in the footprint of the bottom
+  layer's first cell, on the ground too, is level with it: it counted as below by 2e-13
+  m, the rounding of the interpolated height, without a ``LEVEL``, and by 1.8-3.9 nm at
+  129 x 129 with 1 nm, in 5 of 8 folds with no edge through a triangle.)
 * ``far_edge_moved``: how far the far edge's points moved at most (m), in 3-D.
 * ``fold_line``, ``fold_offset``: where the crease lies (the folded cloth's smallest y)
   and how far that is from where the client put it, the middle of the rest rectangle (m).
@@ -24,8 +25,9 @@ cloth's v axis, which the fold scene lays along +y):
 from hcloth_ros.core.model import grid_triangles
 import numpy as np
 
-# How far (m) a top-layer point must be below the bottom layer to count: beyond rounding.
-LEVEL = 1e-9
+# How far (m) a top-layer point must be below the bottom layer to count: beyond the
+# nanometres by which two points on the ground differ, far within any thickness
+LEVEL = 1e-6
 
 
 def fold_metrics(before, after):
