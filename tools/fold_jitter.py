@@ -33,7 +33,7 @@ import contextlib
 import time
 
 from hcloth_ros import params
-from hcloth_ros.bench.self_contact import timed_carry, timed_kernel
+from hcloth_ros.bench.self_contact import in_contact, timed_carry, timed_kernel
 from hcloth_ros.demo import fold_client
 from hcloth_ros.demo.fold_metrics import describe, fold_metrics
 from hcloth_ros.grippers import GripperBank, points_within
@@ -160,7 +160,7 @@ def main(argv=None):
 def cost_summary(costs):
     """Describe :func:`run`'s ``costs``: self-contact's time a tick where layers touch."""
     kernel, pairs, tick = (np.array(c, dtype=float) for c in zip(*costs))
-    touching = kernel[pairs > 0]
+    touching = in_contact(kernel, pairs)
     where = (f'{len(touching)} ticks whose first check found pairs: median '
              f'{np.median(touching):.2f} ms, 90th percentile '
              f'{np.percentile(touching, 90):.2f} ms' if len(touching) else

@@ -1583,18 +1583,19 @@ def _motion(x0, x1, verts, weights):
 
 
 @numba.njit(**JIT)
-def _free_mass(inv_mass, support, v, n, ahead):
-    """Vertex v's inverse mass for a push along n (against it if not ``ahead``), 0 if blocked."""
-    sign = 1.0 if ahead else -1.0
-    return 0.0 if _blocked(support, v, sign * n[0], sign * n[1], sign * n[2]) else inv_mass[v]
+def _free_mass(inv_mass, support, v, n, ahead, held=False):
+    """
+    Vertex v's inverse mass for a push along n (against it if not ``ahead``), 0 if blocked.
 
-
-@numba.njit(**JIT)
-def _yield_mass(inv_mass, support, v, n, ahead):
-    """1 for a held vertex v (a grasp, a pin) with room along n (against it if not ``ahead``)."""
+    ``held``: the weight of a held vertex instead (a grasp, a pin: 1, and 0 for a free
+    one), for a pair whose free vertices cannot move (see :func:`_push`).
+    """
     sign = 1.0 if ahead else -1.0
-    return 1.0 if inv_mass[v] == 0.0 and \
-        not _blocked(support, v, sign * n[0], sign * n[1], sign * n[2]) else 0.0
+    if _blocked(support, v, sign * n[0], sign * n[1], sign * n[2]):
+        return 0.0
+    if held:
+        return 1.0 if inv_mass[v] == 0.0 else 0.0
+    return inv_mass[v]
 
 
 @numba.njit(**INLINE)
@@ -1629,10 +1630,10 @@ def _push(x1, qd, dv, inv_mass, support, verts, weights, ahead, nx, ny, nz, gap,
         # neither side, the layers tangled (the fold with its 65 x 65 level solved, and a
         # grasp lowered onto a folded cloth on the ground: 6-18 edges through triangles);
         # the hold yields instead, and the grasp pulls it back next step
-        ims = (_yield_mass(inv_mass, support, verts[0], n_, 0 < ahead),
-               _yield_mass(inv_mass, support, verts[1], n_, 1 < ahead),
-               _yield_mass(inv_mass, support, verts[2], n_, False),
-               _yield_mass(inv_mass, support, verts[3], n_, False))
+        ims = (_free_mass(inv_mass, support, verts[0], n_, 0 < ahead, True),
+               _free_mass(inv_mass, support, verts[1], n_, 1 < ahead, True),
+               _free_mass(inv_mass, support, verts[2], n_, False, True),
+               _free_mass(inv_mass, support, verts[3], n_, False, True))
         denom = _share(weights, ims)
         if not denom > 0.0:
             return 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
