@@ -21,9 +21,10 @@ BYTES_PER_POINT = {'multigrid': 1050, 'hierarchical': 380, 'implicit': 520,
 # (2026-11-29: 189-279 B more a point with self-contact than without, the most under
 # multigrid, its later calls' clean positions included; 220 before)
 SELF_CONTACT_BYTES = 290
-# multigrid with solver.newton_tolerance_steps: moved keeps its solved level's last solve
-# (positions and velocities, 48 bytes a point of that level; counted on every point)
-MOVED_TOLERANCE_BYTES = 48
+# multigrid keeps its solved level's last solve (positions and velocities, 48 bytes a point
+# of that level; counted on every point): for newton_tolerance_steps: moved and for BDF2's
+# history (MultigridSolver._corrections_leave_history)
+SOLVE_COPY_BYTES = 48
 BASE = 215e6
 MB = 1e6
 
@@ -45,8 +46,8 @@ def estimate(values):
     per_point = BYTES_PER_POINT[values['solver.name']]
     if float(values['self_contact.thickness']) > 0:
         per_point += SELF_CONTACT_BYTES
-    if values['solver.name'] == 'multigrid' and values['solver.newton_tolerance_steps'] == 'moved':
-        per_point += MOVED_TOLERANCE_BYTES
+    if values['solver.name'] == 'multigrid':
+        per_point += SOLVE_COPY_BYTES
     return BASE + per_point * points, points
 
 

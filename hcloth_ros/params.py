@@ -81,7 +81,7 @@ PARAMS = [
     Param('solver.solved_strain_limit', 0.0, 'multigrid: strain limiting on the level it '
           'solves (0.1 = 10 %; 0: off, its springs hold the cloth on their own). Where that '
           'level is the finest and touches the ground or itself, contact stretches its '
-          'springs with nothing to pull them back (1.7 in the folded drop at 129 x 129)',
+          'springs with nothing to pull them back (0.72 in the folded drop at 129 x 129)',
           0.0, 9.99),
     Param('solver.integrator', 'bdf2', 'multigrid: bdf2 or backward_euler',
           choices=('bdf2', 'backward_euler')),

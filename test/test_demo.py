@@ -137,19 +137,15 @@ def test_the_multigrid_solver_folds_the_cloth_without_tearing_it():
     assert metrics['far_edge_moved'] <= 0.02 and metrics['fold_offset'] <= 0.06
 
 
-@pytest.mark.xfail(strict=True, reason="a known limit: BDF2's anchor extrapolates the "
-                   'corrections made after the solve, and the fold rolls open '
-                   '(doc/accurate_solver_log.md)')
 def test_the_multigrid_solver_solving_the_finest_level_holds_the_fold():
     """
     The fold with ``multigrid`` solving its 65 x 65 finest level (seed 0), the demo's targets.
 
-    Today the cloth gains kinetic energy lying on itself after the release (0.09 to 52 mJ
-    in a second) and its fold rolls open: the crease ends 50.5 cm from the middle. With
-    the corrections moved into BDF2's history (measured in a tree copy, not landed: the
-    table edge needs it to hold the coarse solve otherwise) the crease ends 1.5 cm from
-    it. Strict: when it passes, the known limit is gone, and this test and the README
-    must say so.
+    With the corrections made after the solve kept in BDF2's history (before 2026-11-30,
+    session 36) the cloth gained kinetic energy lying on itself after the release (0.09 to
+    52 mJ in a second) and its fold rolled open: the crease ended 50.5 cm from the middle.
+    Left out of it (``MultigridSolver._corrections_leave_history``), the crease ends 1.5
+    cm from it.
     """
     metrics = _fold_in_the_engine(0, {'solver.name': 'multigrid',
                                       'solver.solved_strain_limit': 0.1})

@@ -10,7 +10,7 @@ from hcloth_ros.bench import equilibrium
 from hcloth_ros.bench.scenarios import build_model, prepare
 from hcloth_ros.core import ClothBuilder, Control, kernels, make_solver, Placement, State
 from hcloth_ros.core.kernels.multigrid import apply_level, level_directions, level_field
-from hcloth_ros.core.multigrid_solver import _Hierarchy, RUNAWAY
+from hcloth_ros.core.multigrid_solver import _Hierarchy, MultigridSolver, RUNAWAY
 from hcloth_ros.core.scene import make_scene
 import numpy as np
 import pytest
@@ -289,6 +289,37 @@ def test_a_pushed_cloth_is_solved_to_its_newton_tolerance():
     def rms(name):
         return np.sqrt(np.mean(np.sum((steps[name][0] - steps['converged'][0]) ** 2, axis=0)))
     assert rms('tolerance') < rms('fixed') / 3
+
+
+@pytest.mark.parametrize('kept', [False, True])
+def test_a_push_after_the_solve_is_not_motion_to_bdf2(monkeypatch, kept):
+    """
+    A resting cloth pushed 1 mm out of the ground, without gravity, stays where it was put.
+
+    Nothing acts on it after the push (springs at rest, no gravity, no velocity), so the
+    exact motion is none. With the push kept in BDF2's history (the finest level solved,
+    ``kept``: the rule patched as it was before) the anchor ``(4 x_n - x_{n-1}) / 3``
+    carries a third of it on, then a third of that: the cloth drifts up 0.5 mm in all
+    (1/3 + 1/9 + ... of 1 mm) with zero velocity.
+    """
+    if kept:
+        monkeypatch.setattr(MultigridSolver, '_corrections_leave_history',
+                            lambda self, top: False)
+    scene = make_scene(ground_z=0.0, margin=0.002)
+    model = ClothBuilder(resolution=(9, 9), level_count=3, gravity=(0.0, 0.0, 0.0),
+                         scene=scene, placement=Placement(origin=(-0.5, -0.5, 0.001))).finalize()
+    state, control = State.at_rest(model), Control(model)
+    solver = make_solver('multigrid', model, accurate_level=None)
+    assert solver.step(state, control, H).ok
+    assert np.allclose(state.q[-1][2], 0.002, atol=1e-12, rtol=0.0)    # the push
+    for _ in range(30):
+        assert solver.step(state, control, H).ok
+    drift = state.q[-1][2] - 0.002
+    if kept:
+        assert np.allclose(drift, 0.0005, atol=2e-6, rtol=0.0)
+    else:
+        assert np.abs(drift).max() < 1e-9
+    assert np.abs(state.qd[-1]).max() < 1e-9
 
 
 def test_moved_tolerance_steps_iterate_past_the_fixed_count_only_from_a_moved_start():

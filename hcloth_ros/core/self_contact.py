@@ -51,7 +51,8 @@ def solved_level_warning(solver):
     The multigrid solver solving the finest simulated level itself, with self-contact
     and no ``solved_strain_limit``: the solve holds the springs, but the contact passes
     after it move points with nothing to pull their neighbours after them (the folded
-    drop at 129 x 129, ``accurate_level`` 4: 1.7, against 0.14 with 0.1).
+    drop at 129 x 129, ``accurate_level`` 4: 0.72, against 0.11 with 0.1; 1.7 and 0.14
+    while BDF2's history kept those passes' corrections).
     """
     finest = solver.levels()[-1]
     if solver.self_contact is None or not hasattr(solver, 'solved_strain_limit') or \
@@ -59,8 +60,8 @@ def solved_level_warning(solver):
         return None
     return (f'multigrid solves the finest level ({finest}, solver.accurate_level '
             f'{solver.accurate_level}) with self-contact and no solver.solved_strain_limit: '
-            f'contact will stretch its springs with nothing pulling them back (1.7 in the '
-            f'129 x 129 folded drop); set solver.solved_strain_limit (0.1: 0.14 there)')
+            f'contact will stretch its springs with nothing pulling them back (0.72 in the '
+            f'129 x 129 folded drop); set solver.solved_strain_limit (0.1: 0.11 there)')
 
 
 def _up(model):

@@ -290,7 +290,8 @@ class Solver:
         Contact's friction pass, strain limiting, then contact: no point ends inside an obstacle.
 
         Moving bodies' surface velocity is their motion over the step's ``dt`` (``h`` is
-        the velocity's scale, ``beta`` on the multigrid solver's BDF2 level).
+        the velocity's scale, ``beta`` on the multigrid solver's BDF2 level below a refined
+        finest level: ``MultigridSolver._corrections_leave_history``).
         """
         lv, kit = self.model.level(k), self.kernels(k)
         limit = self._strain_limit(inherited_fixed)
