@@ -325,10 +325,12 @@ class MultigridSolver(HierarchicalSolver):
         answers that. With the 65 x 65 finest level solved, a folded cloth lying on the
         ground after the release gained kinetic energy (0.09 to 52 mJ in one second) and
         rolled its fold open in 3 of 8 runs of the fold demo's scene (crease 50.5 cm from
-        the middle); left out, 8 of 8 held (crease 1.2-3.1 cm) and a resting cloth stays
-        still. The contact pass's velocities then scale by ``h``, not ``beta``: with
-        ``beta`` a cloth on a tray accelerated under Coulomb friction at 1.5 times
-        ``mu g``; with ``h``, at ``mu g`` exactly.
+        the middle); left out, 8 of 8 held (crease 1.2-3.1 cm), and a cloth pushed with
+        nothing else acting on it stays put. The passes after the solve then scale
+        velocities by ``h``, not ``beta``: with ``beta`` a cloth on a tray accelerated
+        under Coulomb friction at 1.5 times ``mu g``; with ``h``, at ``mu g`` exactly
+        (``test_bodies.py``, ``multigrid-finest``). A cloth lying still still sinks by its
+        weight's ``g h^2`` in each solve, and is pushed back after it.
 
         Only where the solved level is the finest simulated one. Below a refined finest
         level, the finest level's contact reaches the solve through the history alone:

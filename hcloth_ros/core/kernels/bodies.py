@@ -293,7 +293,8 @@ def _respond(q, qd, dv, q_prev, r, c, b, h, dt, planes, plane_friction, margin,
     Move point (r, c) out of body b, or hold it where b presses it into a plane.
 
     ``l``/``s``: the point in the body's frame at the end / start of the step; ``h``: the
-    velocity's scale (``x = x^ + h v``); ``dt``: the step, over which the body moved.
+    velocity's scale (``x = x^ + h v``; see ``body_contact``); ``dt``: the step, over which
+    the body moved.
     Returns whether the point was inside.
 
     Pushed out: friction's budget is ``mu`` times the larger of the normal speed removed
@@ -444,7 +445,8 @@ def body_contact(
         # holds, whether inherited points belong to the coarser level
         q_prev, hold_kind, inherited_fixed,
         # inputs: the bodies (rows of ROW numbers), distance kept from them, the velocity's
-        # scale (x = x^ + h v: the step, or BDF2's beta) and the step the bodies moved over
+        # scale (x = x^ + h v: the step, or BDF2's beta below a refined finest level,
+        # MultigridSolver._corrections_leave_history) and the step the bodies moved over
         bodies, margin, h, dt,
         # inputs: the static planes (a body pressing a point into one squeezes it) and their
         # friction coefficient
