@@ -335,7 +335,8 @@ class MultigridSolver(HierarchicalSolver):
         Only where the solved level is the finest simulated one. Below a refined finest
         level, the finest level's contact reaches the solve through the history alone:
         left out, the 17 x 17 solve of a cloth draped over a table pulled its table-top
-        points 15 mm a step into the table and over the edge, and the 129 x 129 finest
+        points by the edges 13-15 mm a step into the table (the corner's reaction, which
+        acts on no coarse point, missing), and the 129 x 129 finest
         springs at the edge stretched to 0.19 against 0.105 (the limit's 1.5 times is
         0.15). (``doc/accurate_solver_log.md``.)
         """
