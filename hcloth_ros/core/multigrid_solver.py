@@ -302,11 +302,15 @@ class MultigridSolver(HierarchicalSolver):
             self._previous[top], self._current[top] = self._current[top], self._previous[top]
             if self._corrections_leave_history(top):
                 # the state before this step moves with what the passes after the solve
-                # changed, so that BDF2 sees only the solve's motion
+                # changed, so that BDF2 sees only the solve's motion (the strain limiting
+                # workspace, free at the step's end, holds each change)
                 x_before, v_before = self._previous[top]
                 solved_q, solved_qd = self._solved[top]
-                x_before += state.q[top] - solved_q
-                v_before += state.qd[top] - solved_qd
+                change = self._scratch[top]
+                np.subtract(state.q[top], solved_q, out=change)
+                x_before += change
+                np.subtract(state.qd[top], solved_qd, out=change)
+                v_before += change
             np.copyto(self._current[top][0], state.q[top])
             np.copyto(self._current[top][1], state.qd[top])
             self._history_key = (h, self.integrator, self.finest_level, state.time, held)
