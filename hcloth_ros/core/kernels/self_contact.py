@@ -148,6 +148,12 @@ BEYOND = 0.5
 PAIRS_PER_POINT = 8
 # Edge pairs a step may hold per free edge of the grid.
 EDGE_PAIRS_PER_EDGE = 32
+# The edges _edge_against takes from a cell (r, c): along its first row, down its first
+# column, its diagonal, along its last row and down its last column; each as its first
+# end's row and its last's (offsets from r), the same for columns (from c), and its
+# direction in _edge's numbering from its first end
+CELL_EDGES = np.array([(0, 0, 0, 1, 0), (0, 1, 0, 0, 1), (0, 1, 0, 1, 2), (1, 1, 0, 1, 0),
+                       (0, 1, 1, 1, 1)], dtype=np.int64)
 
 
 @numba.njit(**JIT)
@@ -790,14 +796,15 @@ def _side_cubic(x0, x1, p, i, j, k):
 def _near_blocks(subs, ends, shift, thickness, ai, aj, bi, bj, fresh_blocks, b_boxes, near,
                  counts, work, kept):
     """
-    List, for each block of patch A, the blocks of patch B its points may come near.
+    List, for each block of patch A, the blocks of patch B it may come near; return how many.
 
     In the frame moving by ``shift``: ``near[a, :counts[a]]`` are the B blocks (as
     ``si * width + sj``, in row-major order) whose box meets the box of A's block ``a``
     (``a = (ui - ai per) per + uj - aj per``, ``per`` blocks a patch side, also on border
     patches with fewer) grown by ``thickness``. A point's path lies in its block's box,
     so a point tests only its block's list instead of every B block (760,000 box tests a
-    detection on the fold demo's resting layers, 2 % of them met). ``b_boxes`` holds B's
+    detection on the fold demo's resting layers, 2 % of them met), and so does an edge of
+    the block (:func:`_edge_against`). ``b_boxes`` holds B's
     boxes. An A block with no vertex marked in ``fresh_blocks`` lists only the B blocks
     with one (its points need no test against the others). ``work`` (at least (2, 6))
     and ``kept`` (``per * per``) are scratch space.
@@ -826,6 +833,7 @@ def _near_blocks(subs, ends, shift, thickness, ai, aj, bi, bj, fresh_blocks, b_b
             m += 1
     _moving_box(ends[bi, bj], shift, 0.0, patch)
     b_width = t1 - t0
+    listed = 0
     for ui in range(ai * per, min((ai + 1) * per, subs.shape[0])):
         for uj in range(aj * per, min((aj + 1) * per, subs.shape[1])):
             a = (ui - ai * per) * per + uj - aj * per
@@ -840,26 +848,26 @@ def _near_blocks(subs, ends, shift, thickness, ai, aj, bi, bj, fresh_blocks, b_b
                         _overlap(box, b_boxes[m]):
                     near[a, counts[a]] = si * width + sj
                     counts[a] += 1
+                    listed += 1
+    return listed
 
 
 @numba.njit(**JIT)
-def _points_against(x0, x1, rows, cols, thickness, substeps, subs, ends, shift, ai, aj, bi,
-                    bj, fresh, fresh_blocks, pairs, sides, count, b_boxes, near, counts,
-                    tri_boxes, tri_ready, work, kept):
+def _points_against(x0, x1, rows, cols, thickness, substeps, subs, shift, ai, aj, bi, bj,
+                    fresh, fresh_blocks, pairs, sides, count, b_boxes, near, counts,
+                    tri_boxes, tri_ready, work):
     """
     Test patch A's points against patch B's triangles; returns the new pair count.
 
     Boxes are taken in the frame moving by ``shift`` (see :func:`_moving_box`); each
-    point tests the B blocks of its own block's list (:func:`_near_blocks`, which fills
-    ``b_boxes``, ``near`` and ``counts``), in the order of the blocks. Only pairs with a
-    point marked in ``fresh`` are tested (``fresh_blocks``: the blocks with a vertex
-    marked): the others have not moved since a detection found them apart. ``work`` (3, 6)
-    and ``kept`` are scratch space.
+    point tests the B blocks of its own block's list (``b_boxes``, ``near`` and
+    ``counts``, as :func:`_near_blocks` filled them for this pair), in the order of the
+    blocks. Only pairs with a point marked in ``fresh`` are tested (``fresh_blocks``: the
+    blocks with a vertex marked): the others have not moved since a detection found them
+    apart. ``work`` (3, 6) is scratch space.
     """
     path = work[2]
     tri_ready[:] = False
-    _near_blocks(subs, ends, shift, thickness, ai, aj, bi, bj, fresh_blocks, b_boxes, near,
-                 counts, work, kept)
     r0, r1 = ai * PATCH, min((ai + 1) * PATCH, rows - 1)
     c0, c1 = aj * PATCH, min((aj + 1) * PATCH, cols - 1)
     # the points a patch owns: its cells' top-left corners, and the grid's last row and
@@ -1035,7 +1043,7 @@ def _segment_box(x0, x1, a, b, shift, reach, out):
 
 @numba.njit(**JIT)
 def _edge_against(x0, x1, rows, cols, thickness, substeps, subs, shift, e, bi, bj, fresh,
-                  fresh_blocks, pairs, sides, count, boxes, b_boxes, crease):
+                  fresh_blocks, pairs, sides, count, boxes, b_boxes, crease, near, near_count):
     """
     Test edge e, free or a crease, against the edges of patch B; returns the new pair count.
 
@@ -1048,7 +1056,10 @@ def _edge_against(x0, x1, rows, cols, thickness, substeps, subs, shift, e, bi, b
     Only pairs with an end marked in ``fresh`` are tested (``fresh_blocks``: the blocks
     with one, see :func:`_fresh_blocks`). ``boxes``: room for two boxes (6 numbers each);
     ``b_boxes``: the boxes B's blocks sweep in the frame moving by ``shift``, in row-major
-    order (:func:`_moving_box`).
+    order (:func:`_moving_box`). ``near[:near_count]``: the B blocks e may come near,
+    those of its block's list (:func:`_near_blocks`; the block holds both of e's ends, so
+    its box holds e's path): looping over all of B's blocks instead was 87,000 box tests a
+    detection, 2 % of them met, on the folded drop's landing at 129 x 129.
     """
     a, b = _edge(e, cols)
     free = _on_border(a, b, rows, cols)
@@ -1058,66 +1069,80 @@ def _edge_against(x0, x1, rows, cols, thickness, substeps, subs, shift, e, bi, b
     box, other = boxes[0], boxes[1]
     _segment_box(x0, x1, a, b, shift, thickness, box)
     per = PATCH // SUB
-    m = -1
-    for si in range(bi * per, min((bi + 1) * per, subs.shape[0])):
-        for sj in range(bj * per, min((bj + 1) * per, subs.shape[1])):
-            m += 1
-            if not (moved or fresh_blocks[si, sj]):
-                continue
-            if not _overlap(box, b_boxes[m]):
-                continue
-            for u in range(si * SUB, min((si + 1) * SUB, rows - 1)):
-                for v in range(sj * SUB, min((sj + 1) * SUB, cols - 1)):
-                    i = u * cols + v
-                    for d in range(5):
-                        if d == 3 and u != rows - 2 or d == 4 and v != cols - 2:
-                            continue
-                        # the cell's last row or column edge: the grid's border
-                        f = 3 * i + d if d < 3 else \
-                            (3 * (i + cols) if d == 3 else 3 * (i + 1) + 1)
-                        c, dd = _edge(f, cols)
-                        if not (moved or fresh[c] or fresh[dd]):
-                            continue
-                        if ra0 - RING <= max(c // cols, dd // cols) and \
-                                min(c // cols, dd // cols) <= ra1 + RING and \
-                                ca0 - RING <= max(c % cols, dd % cols) and \
-                                min(c % cols, dd % cols) <= ca1 + RING:
-                            continue
-                        if _on_border(c, dd, rows, cols):
-                            if not free or f < e:
-                                continue    # found as e's partner when f was tested
-                        elif not free and f < e and crease[f]:
-                            continue        # the same
-                        _segment_box(x0, x1, c, dd, shift, 0.0, other)
-                        if not _overlap(box, other):
-                            continue
-                        # a crease is kept from crossing, not a thickness away: the turns
-                        # of a rolled border, creased past the bound, pushed apart,
-                        # stretched a double fold's springs to 4.5 at 129 x 129 where
-                        # crossings alone leave 0.77 (1.13 without creases)
-                        side = _edge_side(x0, x1, a, b, c, dd, thickness, substeps, shift,
-                                          free)
-                        if side != 0.0:
-                            if count < pairs.shape[0]:
-                                pairs[count, 0], pairs[count, 1] = e, f
-                                sides[count] = side
-                            count += 1
+    width = subs.shape[1]
+    b_width = min((bj + 1) * per, width) - bj * per
+    for listed in range(near_count):
+        si, sj = near[listed] // width, near[listed] % width
+        if not (moved or fresh_blocks[si, sj]):
+            continue
+        m = (si - bi * per) * b_width + sj - bj * per
+        if not _overlap(box, b_boxes[m]):
+            continue
+        for u in range(si * SUB, min((si + 1) * SUB, rows - 1)):
+            for v in range(sj * SUB, min((sj + 1) * SUB, cols - 1)):
+                for d in range(5):
+                    if d == 3 and u != rows - 2 or d == 4 and v != cols - 2:
+                        continue
+                    # the cell's last row or column edge: the grid's border. Its ends' rows
+                    # and columns from the cell's (integer divisions of the indices were
+                    # half the time of these loops)
+                    r_lo, r_hi = u + CELL_EDGES[d, 0], u + CELL_EDGES[d, 1]
+                    c_lo, c_hi = v + CELL_EDGES[d, 2], v + CELL_EDGES[d, 3]
+                    c, dd = r_lo * cols + c_lo, r_hi * cols + c_hi
+                    if not (moved or fresh[c] or fresh[dd]):
+                        continue
+                    if ra0 - RING <= r_hi and r_lo <= ra1 + RING and \
+                            ca0 - RING <= c_hi and c_lo <= ca1 + RING:
+                        continue
+                    f = 3 * c + CELL_EDGES[d, 4]
+                    if (r_lo == r_hi and (r_lo == 0 or r_lo == rows - 1)) or \
+                            (c_lo == c_hi and (c_lo == 0 or c_lo == cols - 1)):
+                        if not free or f < e:
+                            continue    # found as e's partner when f was tested
+                    elif not free and f < e and crease[f]:
+                        continue        # the same
+                    _segment_box(x0, x1, c, dd, shift, 0.0, other)
+                    if not _overlap(box, other):
+                        continue
+                    # a crease is kept from crossing, not a thickness away: the turns
+                    # of a rolled border, creased past the bound, pushed apart,
+                    # stretched a double fold's springs to 4.5 at 129 x 129 where
+                    # crossings alone leave 0.77 (1.13 without creases)
+                    side = _edge_side(x0, x1, a, b, c, dd, thickness, substeps, shift,
+                                      free)
+                    if side != 0.0:
+                        if count < pairs.shape[0]:
+                            pairs[count, 0], pairs[count, 1] = e, f
+                            sides[count] = side
+                        count += 1
     return count
 
 
 @numba.njit(**JIT)
+def _block_of(r, c, ai, aj, rows, cols):
+    """
+    Return the index in patch (ai, aj) of the block holding grid point (r, c), a point of it.
+
+    Row-major over the patch's blocks (as :func:`_near_blocks` numbers them); the grid's
+    last row and column belong to the last block along them.
+    """
+    per = PATCH // SUB
+    last_i, last_j = (rows - 2) // SUB, (cols - 2) // SUB
+    return (min(r // SUB, last_i) - ai * per) * per + min(c // SUB, last_j) - aj * per
+
+
+@numba.njit(**JIT)
 def _free_edges_against(x0, x1, rows, cols, thickness, substeps, subs, shift, ai, aj, bi,
-                        bj, fresh, fresh_blocks, dirty, pairs, sides, count, crease):
+                        bj, fresh, fresh_blocks, dirty, pairs, sides, count, crease, b_boxes,
+                        near, counts, boxes):
     """
     Test patch A's edges on the grid's border against patch B's edges (see _edge_against).
 
     An edge with no end marked in ``fresh`` is tested only if B has a block marked in
-    ``fresh_blocks`` (``dirty``: such patches).
+    ``fresh_blocks`` (``dirty``: such patches). ``b_boxes``, ``near`` and ``counts``: B's
+    blocks' boxes and A's blocks' lists of them, as :func:`_near_blocks` left them for
+    this pair; ``boxes``: room for two boxes.
     """
-    boxes = np.empty((2, 6))
-    # B's blocks' boxes in the pair's frame, once for all of A's edges
-    b_boxes = np.empty(((PATCH // SUB) ** 2, 6))
-    _patch_block_boxes(subs, bi, bj, shift, b_boxes)
     r0, r1 = ai * PATCH, min((ai + 1) * PATCH, rows - 1)
     c0, c1 = aj * PATCH, min((aj + 1) * PATCH, cols - 1)
     for side in range(4):
@@ -1126,25 +1151,30 @@ def _free_edges_against(x0, x1, rows, cols, thickness, substeps, subs, shift, ai
             for c in range(c0, c1):
                 e = 3 * (row * cols + c)
                 a, b = _edge(e, cols)
-                if dirty[bi, bj] or fresh[a] or fresh[b]:
+                block = _block_of(row, c, ai, aj, rows, cols)
+                if counts[block] and (dirty[bi, bj] or fresh[a] or fresh[b]):
                     count = _edge_against(x0, x1, rows, cols, thickness, substeps, subs,
                                           shift, e, bi, bj, fresh, fresh_blocks, pairs,
-                                          sides, count, boxes, b_boxes, crease)
+                                          sides, count, boxes, b_boxes, crease, near[block],
+                                          counts[block])
         if side == 2 and c0 == 0 or side == 3 and c1 == cols - 1:
             col = 0 if side == 2 else cols - 1
             for r in range(r0, r1):
                 e = 3 * (r * cols + col) + 1
                 a, b = _edge(e, cols)
-                if dirty[bi, bj] or fresh[a] or fresh[b]:
+                block = _block_of(r, col, ai, aj, rows, cols)
+                if counts[block] and (dirty[bi, bj] or fresh[a] or fresh[b]):
                     count = _edge_against(x0, x1, rows, cols, thickness, substeps, subs,
                                           shift, e, bi, bj, fresh, fresh_blocks, pairs,
-                                          sides, count, boxes, b_boxes, crease)
+                                          sides, count, boxes, b_boxes, crease, near[block],
+                                          counts[block])
     return count
 
 
 @numba.njit(**JIT)
 def _crease_edges_against(x0, x1, rows, cols, thickness, substeps, subs, shift, ai, aj, bi,
-                          bj, fresh, fresh_blocks, dirty, pairs, sides, count, crease):
+                          bj, fresh, fresh_blocks, dirty, pairs, sides, count, crease,
+                          b_boxes, near, counts, boxes):
     """
     Test patch A's creases against patch B's edges (see _edge_against and _patch_creases).
 
@@ -1152,12 +1182,14 @@ def _crease_edges_against(x0, x1, rows, cols, thickness, substeps, subs, shift, 
     with no point passing through or coming near a triangle (a cloth folded twice, where
     the second fold crosses the first, tangled so at 65 x 65). An edge with no end marked
     in ``fresh`` is tested only if B has a block marked in ``fresh_blocks`` (``dirty``).
+    ``b_boxes``, ``near``, ``counts`` and ``boxes``: as :func:`_free_edges_against` takes
+    them.
     """
-    boxes = np.empty((2, 6))
-    b_boxes = np.empty(((PATCH // SUB) ** 2, 6))
-    have = False
     for r in range(ai * PATCH, min((ai + 1) * PATCH, rows - 1)):
         for c in range(aj * PATCH, min((aj + 1) * PATCH, cols - 1)):
+            block = _block_of(r, c, ai, aj, rows, cols)
+            if counts[block] == 0:
+                continue
             v = r * cols + c
             for d in range(3):
                 e = 3 * v + d
@@ -1166,12 +1198,9 @@ def _crease_edges_against(x0, x1, rows, cols, thickness, substeps, subs, shift, 
                 a, b = _edge(e, cols)
                 if not (dirty[bi, bj] or fresh[a] or fresh[b]):
                     continue
-                if not have:        # B's blocks' boxes in the pair's frame, once
-                    _patch_block_boxes(subs, bi, bj, shift, b_boxes)
-                    have = True
                 count = _edge_against(x0, x1, rows, cols, thickness, substeps, subs, shift,
                                       e, bi, bj, fresh, fresh_blocks, pairs, sides, count,
-                                      boxes, b_boxes, crease)
+                                      boxes, b_boxes, crease, near[block], counts[block])
     return count
 
 
@@ -1300,6 +1329,7 @@ def _detect(x0, x1, rows, cols, thickness, substeps, dirty, fresh, fresh_blocks,
     tri_boxes = np.empty((per * per, 2 * SUB * SUB, 6))
     tri_ready = np.empty(per * per, dtype=np.bool_)
     work, kept = np.empty((3, 6)), np.empty(per * per, dtype=np.int64)     # scratch
+    edge_boxes = np.empty((2, 6))
     creased = np.full((pr, pc), -1, dtype=np.int8)     # per patch: unknown, no, yes
     normals = np.empty((PATCH + 1, PATCH + 1, 2, 4))     # see _patch_creases
     # sweep and prune along x over the patches' boxes
@@ -1338,21 +1368,26 @@ def _detect(x0, x1, rows, cols, thickness, substeps, dirty, fresh, fresh_blocks,
                         _patch_creases(x, rows, cols, patch_i, patch_j, crease_cosine,
                                        time + 1, crease, normals)
                         crease_ready[patch_i, patch_j, time] = True
-            count = _points_against(x0, x1, rows, cols, thickness, substeps, subs, ends,
-                                    shift, ai, aj, bi, bj, fresh, fresh_blocks, pairs, sides,
-                                    count, b_boxes, near, counts, tri_boxes, tri_ready,
-                                    work, kept)
-            if a != b:
-                count = _points_against(x0, x1, rows, cols, thickness, substeps, subs, ends,
-                                        shift, bi, bj, ai, aj, fresh, fresh_blocks, pairs, sides,
-                                        count, b_boxes, near, counts, tri_boxes,
-                                        tri_ready, work, kept)
+            # each way round: A's blocks' lists of the B blocks near them, then A's points
+            # against B's triangles and A's free edges and creases against B's edges, on
+            # those lists. Most ways round list nothing (the fold demo's layers at rest:
+            # three in four of the 1,400 a detection, patches whose boxes meet only
+            # within the thickness they are grown by)
             for patch_i, patch_j, other_i, other_j in ((ai, aj, bi, bj), (bi, bj, ai, aj)):
+                if not _near_blocks(subs, ends, shift, thickness, patch_i, patch_j, other_i,
+                                    other_j, fresh_blocks, b_boxes, near, counts, work, kept):
+                    if a == b:
+                        break
+                    continue
+                count = _points_against(x0, x1, rows, cols, thickness, substeps, subs, shift,
+                                        patch_i, patch_j, other_i, other_j, fresh,
+                                        fresh_blocks, pairs, sides, count, b_boxes, near,
+                                        counts, tri_boxes, tri_ready, work)
                 if patch_i == 0 or patch_i == pr - 1 or patch_j == 0 or patch_j == pc - 1:
                     edge_count = _free_edges_against(
                         x0, x1, rows, cols, thickness, substeps, subs, shift, patch_i,
                         patch_j, other_i, other_j, fresh, fresh_blocks, dirty, edge_pairs,
-                        edge_sides, edge_count, crease)
+                        edge_sides, edge_count, crease, b_boxes, near, counts, edge_boxes)
                 # (most patches have no crease: their flags read once a detection)
                 if creased[patch_i, patch_j] < 0:
                     creased[patch_i, patch_j] = _has_creases(crease, rows, cols, patch_i,
@@ -1361,7 +1396,7 @@ def _detect(x0, x1, rows, cols, thickness, substeps, dirty, fresh, fresh_blocks,
                     edge_count = _crease_edges_against(
                         x0, x1, rows, cols, thickness, substeps, subs, shift, patch_i,
                         patch_j, other_i, other_j, fresh, fresh_blocks, dirty, edge_pairs,
-                        edge_sides, edge_count, crease)
+                        edge_sides, edge_count, crease, b_boxes, near, counts, edge_boxes)
                 if a == b:
                     break
     return count, edge_count
