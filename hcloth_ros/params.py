@@ -149,9 +149,9 @@ PARAMS = [
     Param('self_contact.edges', 'auto', 'self-contact: the edges tested against edges '
           'besides the free borders: sharp (creases bent enough for an edge to pass under '
           'them a thickness clear), creases (those and every edge bent past 10 degrees: '
-          'layers meeting fast hook edges bent less; 1.6-2.7 times the cost of sharp where '
+          'layers meeting fast hook edges bent less; 1.2-1.9 times the cost of sharp where '
           'layers touch), all (every bent edge: a cloth crumpled finer than its coarse '
-          'levels hooks edges a few rows apart; about 2.8 times the cost of sharp) or auto '
+          'levels hooks edges a few rows apart; 1.2-1.3 times the cost of creases) or auto '
           '(all on a level the solver solves whole, creases on eq. 7 refinements)',
           choices=('auto', 'creases', 'sharp', 'all')),
     Param('pinned_points', [0, 8], 'finest-level point ids that hold still (see README '

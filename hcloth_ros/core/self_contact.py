@@ -110,9 +110,10 @@ class SelfContact:
         spacing); ``'creases'``, those and every edge bent past 10 degrees (an edge's
         ends keep the thickness only at the ends of a step: the double fold, its layers
         meeting fast, tangled in 6 of 44 runs with ``'sharp'`` and none with
-        ``'creases'``, at 1.6-2.7 times the cost where layers touch);
+        ``'creases'``, at 1.2-1.9 times the cost where layers touch);
         ``'all'``, every bent edge (a cloth crumpled in compression hooks edges a few
-        rows apart that bend less), about 2.8 times the cost of ``'sharp'``; ``'auto'``,
+        rows apart that bend less), 1.2-1.3 times the cost of ``'creases'`` (2.1-2.8
+        before the edges' tests used the points' block lists, 2026-11-30); ``'auto'``,
         all on a level the solver solves itself (:meth:`Solver.solves`: multigrid's
         accurate level, which let the folded drop crumple so), creases elsewhere. The
         kernel's ``crease_angle``: :func:`~hcloth_ros.core.kernels.self_contact._crease_cosine`.
