@@ -15,7 +15,8 @@ from hcloth_ros.core import ClothBuilder, Control, make_scene, make_solver, Stat
 from hcloth_ros.core import kernels
 from hcloth_ros.core.kernels.self_contact import (_edge_side, _fresh_blocks, _may_cross,
                                                   _pair_side, _resolve, _resolve_passes,
-                                                  _triangle, BOXES_KEPT, BOXES_NEW, carry,
+                                                  _triangle, BOXES_KEPT,
+                                                  BOXES_KEPT_NEW_START, BOXES_NEW, carry,
                                                   CREASE_ANGLE, MAX_SUBSTEPS,
                                                   MIN_SUBSTEPS, obstacle_supports, ON_EDGE,
                                                   patch_cache, REACH, RESOLVE_PASSES, RING,
@@ -570,6 +571,48 @@ def test_a_call_told_which_points_moved_finds_what_a_whole_call_finds():
     for mine, theirs in zip((end, qd, dv), whole):
         assert np.array_equal(mine, theirs)
     assert violations(start, end, THICKNESS) == (0, 0)
+
+
+def test_a_later_call_sees_a_point_pass_through_a_kept_patch_whose_sweep_fell():
+    """
+    A patch whose boxes a later call keeps, swept falling by the call before, still meets a point.
+
+    The first call's step drops the folded cloth 3 cm whole and leaves its layers 1.1
+    thicknesses apart: nothing near. A later call, its paths from there, is told that the
+    top layer's rows clear of the fold moved down through the bottom layer, to 1.2
+    thicknesses below it (flat: no crease for the edge tests to catch them by). The
+    bottom layer did not move, and its patches keep their boxes; their
+    sweep's motion, kept with them until 2026-11-30 (session 37), moved the frame the
+    pair's boxes are taken in by 1.5 cm, where their start box did not hold the bottom
+    layer, and the points passed through it unseen. Now the kept boxes are cut down to
+    where the points are (:func:`~hcloth_ros.core.kernels.self_contact._still_sweeps`).
+    """
+    model = folded_model(ground=None)
+    lv = model.level(model.level_count - 1)
+    end = folded_state(model, 0.5).q[-1]
+    top = slice(end.shape[1] // 2 + 1, None)
+    end[2, top] -= GAP - 1.1 * THICKNESS
+    end[0, top] += 0.3 * lv.du          # off the bottom's grid points
+    start = end.copy()
+    start[2] += 0.03
+    qd = np.full_like(end, 0.0)
+    qd[2] = -0.03 / H
+    q, cache = end.copy(), patch_cache(*lv.shape)
+    hold, support = np.zeros(lv.shape, dtype=np.int8), _no_support(lv)
+    first = kernels.self_contact(q, qd, np.zeros_like(end), start, start, lv.mass, hold,
+                                 np.ones(lv.shape, dtype=np.bool_), support, THICKNESS, 0.0,
+                                 4, H, 10.0, UP, *cache, BOXES_NEW, CREASE_ANGLE)
+    assert first[0] == 0 and first[3]       # nothing near; clean
+    clean = q.copy()
+    moved = np.zeros(lv.shape, dtype=np.bool_)
+    upper, _ = _flat_rows(top)
+    moved[upper] = True
+    q[2, moved] -= 2.3 * THICKNESS
+    later = kernels.self_contact(q, qd, np.zeros_like(end), start, clean, lv.mass, hold,
+                                 moved, support, THICKNESS, 0.0, 4, H, 10.0, UP, *cache,
+                                 BOXES_KEPT_NEW_START, CREASE_ANGLE)
+    assert later[0] >= moved.sum()
+    assert violations(clean, q, THICKNESS) == (0, 0)
 
 
 @pytest.mark.parametrize('rows, cols', [(2, 2), (3, 3), (4, 9), (33, 17), (129, 129)])

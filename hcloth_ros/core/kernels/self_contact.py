@@ -95,7 +95,10 @@ import numpy as np
 # (``q_from``), stale only round the points moved since; the same but the paths now
 # start where the last call left the level clean. Those boxes still hold every path: a
 # patch none of whose points moved since its boxes were swept has its points where they
-# ended, at the new start and at the end alike. So do its creases' flags at the step's
+# ended, at the new start and at the end alike (with a new start, its boxes are cut down
+# to where they ended and its motion to none, :func:`_still_sweeps`: the frame a pair's
+# boxes are taken in moves by the patches' motion, and a swept box kept with its motion
+# held the points' end, not their start). So do its creases' flags at the step's
 # start and at the end (an edge creased at either is tested: more tests, none missed); the
 # stale patches take their start's flags anew. The longest edge stays the step's start's
 # (strain limiting keeps edges near it)
@@ -2007,6 +2010,8 @@ def self_contact(
     touched[:, :] = False
     if subs.shape[:2] != fresh_blocks.shape or crease.shape[0] != 3 * n:
         raise ValueError('self_contact: the block cache does not fit the level')
+    if reuse == BOXES_KEPT_NEW_START:
+        _still_sweeps(boxes, ends, subs, subs_ready, stale, thickness)
     first, dropped, clean = _rounds(x0, xs, x1, qdf, dvf, inv_mass, held_up, rows, cols,
                                     thickness, friction, iterations, h, substeps,
                                     crease_cosine, fresh, fresh_blocks, dirty, stale, touched,
@@ -2480,6 +2485,42 @@ def obstacle_supports(planes, boxes, margin, q, out):
                     if room < best:
                         nx, ny, nz, best = 0.0, 0.0, 1.0, room
             out[0, r, c], out[1, r, c], out[2, r, c], out[3, r, c] = nx, ny, nz, best
+
+
+@numba.njit(**JIT)
+def _still_sweeps(boxes, ends, subs, subs_ready, stale, reach):
+    """
+    Cut the kept boxes of the patches not ``stale`` down to where their points are, unmoving.
+
+    For a call whose paths start where the last clean call left the level: the points of
+    such a patch have not moved since its boxes were swept, so they start and end where
+    that sweep ended. Its boxes (:func:`_patch_boxes`, ``boxes`` grown by ``reach``) and
+    its blocks' (``subs``, where ``subs_ready``) become their end's, at both ends, and
+    their motion none. Kept whole, a sweep's motion moved the frame a pair's boxes are
+    taken in (:func:`_moving_box`), and its start box, shifted with it, need not hold the
+    points' start: a patch that fell a centimetre in the sweep lay, in that frame, half a
+    centimetre from its points at the start of the call.
+    """
+    pr, pc = boxes.shape[0], boxes.shape[1]
+    per = PATCH // SUB
+    for bi in range(pr):
+        for bj in range(pc):
+            if stale[bi, bj]:
+                continue
+            for d in range(6):
+                ends[bi, bj, d] = ends[bi, bj, 6 + d]
+            for d in range(3):
+                ends[bi, bj, 12 + d] = 0.0
+                boxes[bi, bj, d] = ends[bi, bj, d] - reach
+                boxes[bi, bj, 3 + d] = ends[bi, bj, 3 + d] + reach
+            if not subs_ready[bi, bj]:
+                continue
+            for si in range(bi * per, min((bi + 1) * per, subs.shape[0])):
+                for sj in range(bj * per, min((bj + 1) * per, subs.shape[1])):
+                    for d in range(6):
+                        subs[si, sj, d] = subs[si, sj, 6 + d]
+                    for d in range(3):
+                        subs[si, sj, 12 + d] = 0.0
 
 
 @numba.njit(**JIT)
