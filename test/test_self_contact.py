@@ -595,7 +595,7 @@ def test_a_later_call_sees_a_point_pass_through_a_kept_patch_whose_sweep_fell():
     end[0, top] += 0.3 * lv.du          # off the bottom's grid points
     start = end.copy()
     start[2] += 0.03
-    qd = np.full_like(end, 0.0)
+    qd = np.zeros_like(end)
     qd[2] = -0.03 / H
     q, cache = end.copy(), patch_cache(*lv.shape)
     hold, support = np.zeros(lv.shape, dtype=np.int8), _no_support(lv)

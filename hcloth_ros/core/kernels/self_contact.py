@@ -880,11 +880,9 @@ def _points_against(x0, x1, rows, cols, thickness, substeps, subs, shift, ai, aj
     per = PATCH // SUB
     width = subs.shape[1]
     b_width = min((bj + 1) * per, width) - bj * per
-    u0, u_last = ai * per, min((ai + 1) * per, subs.shape[0]) - 1
-    v0, v_last = aj * per, min((aj + 1) * per, subs.shape[1]) - 1
     for r in range(r0, r_end):
         for c in range(c0, c_end):
-            a = (min(r // SUB, u_last) - u0) * per + min(c // SUB, v_last) - v0
+            a = _block_of(r, c, ai, aj, rows, cols)
             if counts[a] == 0:
                 continue
             p = r * cols + c
