@@ -472,8 +472,9 @@ def _patch_boxes(x0, x1, rows, cols, size, thickness, boxes, ends, cones, stale)
                 for x in (x0, x1):
                     for c in range(c0, c1):
                         i = r * cols + c
-                        nx, ny, nz = _quad_normal(x, i, i + 1, i + cols, i + cols + 1)
-                        low = min(low, nx * ax + ny * ay + nz * az)
+                        if _below(x, i, i + 1, i + cols, i + cols + 1, ax, ay, az, low):
+                            nx, ny, nz = _quad_normal(x, i, i + 1, i + cols, i + cols + 1)
+                            low = min(low, nx * ax + ny * ay + nz * az)
             for d in range(3):
                 box[d] -= thickness
                 box[3 + d] += thickness
@@ -494,6 +495,29 @@ def _quad_normal(x, a, b, c, d):
     if not norm > 0.0:
         return 0.0, 0.0, 0.0
     return nx / norm, ny / norm, nz / norm
+
+
+@numba.njit(**JIT)
+def _below(x, a, b, c, d, ax, ay, az, low):
+    """
+    Whether the cosine of quadrilateral a, b, c, d's normal and unit ``a*`` may be under ``low``.
+
+    False only where it is not, with a margin (``1e-12``) far above the rounding of the
+    cosine :func:`_quad_normal`'s unit normal gives, without its square root and
+    divisions: the cosine of the normal ``n`` is ``n . a / |n|``, compared squared. A
+    patch's cone takes the smallest over its cells, and most cells do not lower it (the
+    root and the divisions of each cell's unit normal were a third of a step's boxes).
+    """
+    ex, ey, ez = x[0, d] - x[0, a], x[1, d] - x[1, a], x[2, d] - x[2, a]
+    fx, fy, fz = x[0, c] - x[0, b], x[1, c] - x[1, b], x[2, c] - x[2, b]
+    nx, ny, nz = ey * fz - ez * fy, ez * fx - ex * fz, ex * fy - ey * fx
+    dot = nx * ax + ny * ay + nz * az
+    bound = low + 1e-12
+    square = (nx * nx + ny * ny + nz * nz) * bound * bound
+    # dot < bound |n|
+    if bound > 0.0:
+        return not (dot >= 0.0 and dot * dot >= square)
+    return dot < 0.0 and dot * dot > square
 
 
 @numba.njit(**JIT)
@@ -618,21 +642,18 @@ def _block_boxes(x0, x1, r0, r1, c0, c1, cols, out):
     Rows ``r0 .. r1`` by columns ``c0 .. c1`` (inclusive):
     ``out = (min, max at x0, min, max at x1, mean displacement)``.
     """
+    # a coordinate at a time in local variables (kept in ``out`` through the loop, the
+    # blocks' boxes of a whole 129 x 129 level took 0.25 ms, now 0.20)
     for d in range(3):
-        out[d], out[3 + d] = np.inf, -np.inf
-        out[6 + d], out[9 + d] = np.inf, -np.inf
-        out[12 + d] = 0.0
-    for r in range(r0, r1 + 1):
-        for c in range(c0, c1 + 1):
-            i = r * cols + c
-            for d in range(3):
-                out[d] = min(out[d], x0[d, i])
-                out[3 + d] = max(out[3 + d], x0[d, i])
-                out[6 + d] = min(out[6 + d], x1[d, i])
-                out[9 + d] = max(out[9 + d], x1[d, i])
-                out[12 + d] += x1[d, i] - x0[d, i]
-    for d in range(3):
-        out[12 + d] /= (r1 - r0 + 1) * (c1 - c0 + 1)
+        low0, high0, low1, high1, move = np.inf, -np.inf, np.inf, -np.inf, 0.0
+        for r in range(r0, r1 + 1):
+            for c in range(c0, c1 + 1):
+                i = r * cols + c
+                low0, high0 = min(low0, x0[d, i]), max(high0, x0[d, i])
+                low1, high1 = min(low1, x1[d, i]), max(high1, x1[d, i])
+                move += x1[d, i] - x0[d, i]
+        out[d], out[3 + d], out[6 + d], out[9 + d] = low0, high0, low1, high1
+        out[12 + d] = move / ((r1 - r0 + 1) * (c1 - c0 + 1))
 
 
 @numba.njit(**JIT)
@@ -664,17 +685,28 @@ def _patch_block_boxes(subs, bi, bj, shift, out):
 @numba.njit(**JIT)
 def _sub_boxes(x0, x1, rows, cols, bi, bj, subs):
     """
-    Boxes (:func:`_block_boxes`) of patch (bi, bj)'s blocks of ``SUB`` x ``SUB`` cells.
+    Boxes of patch (bi, bj)'s blocks of ``SUB`` x ``SUB`` cells at both ends of the step.
 
     A point tests only the triangles of the blocks its path comes near: 16 boxes and a
     few blocks' triangles where the whole patch's 128 triangles cost 4x more on a cloth
-    lying on itself.
+    lying on itself. ``subs[si, sj] = (min, max at x0, min, max at x1)``, as
+    :func:`_block_boxes` without the motion (a pair's frame moves with its two patches'
+    motion, :func:`_detect`, not with a block's).
     """
     per = PATCH // SUB
     for si in range(bi * per, min((bi + 1) * per, subs.shape[0])):
+        r0, r1 = si * SUB, min((si + 1) * SUB, rows - 1)
         for sj in range(bj * per, min((bj + 1) * per, subs.shape[1])):
-            _block_boxes(x0, x1, si * SUB, min((si + 1) * SUB, rows - 1), sj * SUB,
-                         min((sj + 1) * SUB, cols - 1), cols, subs[si, sj])
+            c0, c1 = sj * SUB, min((sj + 1) * SUB, cols - 1)
+            for d in range(3):
+                low0, high0, low1, high1 = np.inf, -np.inf, np.inf, -np.inf
+                for r in range(r0, r1 + 1):
+                    for c in range(c0, c1 + 1):
+                        i = r * cols + c
+                        low0, high0 = min(low0, x0[d, i]), max(high0, x0[d, i])
+                        low1, high1 = min(low1, x1[d, i]), max(high1, x1[d, i])
+                subs[si, sj, d], subs[si, sj, 3 + d] = low0, high0
+                subs[si, sj, 6 + d], subs[si, sj, 9 + d] = low1, high1
 
 
 @numba.njit(**JIT)
@@ -1044,7 +1076,8 @@ def _segment_box(x0, x1, a, b, shift, reach, out):
 
 @numba.njit(**JIT)
 def _edge_against(x0, x1, rows, cols, thickness, substeps, subs, shift, e, bi, bj, fresh,
-                  fresh_blocks, pairs, sides, count, boxes, b_boxes, crease, near, near_count):
+                  fresh_blocks, pairs, sides, count, boxes, b_boxes, crease, near, near_count,
+                  seg_boxes, seg_ready):
     """
     Test edge e, free or a crease, against the edges of patch B; returns the new pair count.
 
@@ -1055,19 +1088,23 @@ def _edge_against(x0, x1, rows, cols, thickness, substeps, subs, shift, e, bi, b
     a free edge and another, from the free edge; of two creases (``crease``: the flags of
     :func:`_patch_creases`, e one of them unless it is free), from the lower index.
     Only pairs with an end marked in ``fresh`` are tested (``fresh_blocks``: the blocks
-    with one, see :func:`_fresh_blocks`). ``boxes``: room for two boxes (6 numbers each);
+    with one, see :func:`_fresh_blocks`). ``boxes``: room for a box (6 numbers);
     ``b_boxes``: the boxes B's blocks sweep in the frame moving by ``shift``, in row-major
     order (:func:`_moving_box`). ``near[:near_count]``: the B blocks e may come near,
     those of its block's list (:func:`_near_blocks`; the block holds both of e's ends, so
     its box holds e's path): looping over all of B's blocks instead was 87,000 box tests a
     detection, 2 % of them met, on the folded drop's landing at 129 x 129.
+    ``seg_boxes[m, 5 c + d]``: the box B's listed block m's edge d of its cell c (row-major
+    in the block; d as ``CELL_EDGES``) sweeps, made at its first test in this pair and
+    marked in ``seg_ready`` (each is tested by every crease near it: made once a test,
+    they were a third of the edge tests' time on the folded drop).
     """
     a, b = _edge(e, cols)
     free = _on_border(a, b, rows, cols)
     moved = fresh[a] or fresh[b]
     ra0, ra1 = min(a // cols, b // cols), max(a // cols, b // cols)
     ca0, ca1 = min(a % cols, b % cols), max(a % cols, b % cols)
-    box, other = boxes[0], boxes[1]
+    box = boxes[0]
     _segment_box(x0, x1, a, b, shift, thickness, box)
     per = PATCH // SUB
     width = subs.shape[1]
@@ -1102,8 +1139,11 @@ def _edge_against(x0, x1, rows, cols, thickness, substeps, subs, shift, e, bi, b
                             continue    # found as e's partner when f was tested
                     elif not free and f < e and crease[f]:
                         continue        # the same
-                    _segment_box(x0, x1, c, dd, shift, 0.0, other)
-                    if not _overlap(box, other):
+                    slot = 5 * ((u - si * SUB) * SUB + v - sj * SUB) + d
+                    if not seg_ready[m, slot]:
+                        _segment_box(x0, x1, c, dd, shift, 0.0, seg_boxes[m, slot])
+                        seg_ready[m, slot] = True
+                    if not _overlap(box, seg_boxes[m, slot]):
                         continue
                     # a crease is kept from crossing, not a thickness away: the turns
                     # of a rolled border, creased past the bound, pushed apart,
@@ -1135,14 +1175,15 @@ def _block_of(r, c, ai, aj, rows, cols):
 @numba.njit(**JIT)
 def _free_edges_against(x0, x1, rows, cols, thickness, substeps, subs, shift, ai, aj, bi,
                         bj, fresh, fresh_blocks, dirty, pairs, sides, count, crease, b_boxes,
-                        near, counts, boxes):
+                        near, counts, boxes, seg_boxes, seg_ready):
     """
     Test patch A's edges on the grid's border against patch B's edges (see _edge_against).
 
     An edge with no end marked in ``fresh`` is tested only if B has a block marked in
     ``fresh_blocks`` (``dirty``: such patches). ``b_boxes``, ``near`` and ``counts``: B's
     blocks' boxes and A's blocks' lists of them, as :func:`_near_blocks` left them for
-    this pair; ``boxes``: room for two boxes.
+    this pair; ``boxes``: room for a box; ``seg_boxes`` and ``seg_ready``: B's blocks'
+    edges' boxes (see _edge_against).
     """
     r0, r1 = ai * PATCH, min((ai + 1) * PATCH, rows - 1)
     c0, c1 = aj * PATCH, min((aj + 1) * PATCH, cols - 1)
@@ -1157,7 +1198,7 @@ def _free_edges_against(x0, x1, rows, cols, thickness, substeps, subs, shift, ai
                     count = _edge_against(x0, x1, rows, cols, thickness, substeps, subs,
                                           shift, e, bi, bj, fresh, fresh_blocks, pairs,
                                           sides, count, boxes, b_boxes, crease, near[block],
-                                          counts[block])
+                                          counts[block], seg_boxes, seg_ready)
         if side == 2 and c0 == 0 or side == 3 and c1 == cols - 1:
             col = 0 if side == 2 else cols - 1
             for r in range(r0, r1):
@@ -1168,14 +1209,14 @@ def _free_edges_against(x0, x1, rows, cols, thickness, substeps, subs, shift, ai
                     count = _edge_against(x0, x1, rows, cols, thickness, substeps, subs,
                                           shift, e, bi, bj, fresh, fresh_blocks, pairs,
                                           sides, count, boxes, b_boxes, crease, near[block],
-                                          counts[block])
+                                          counts[block], seg_boxes, seg_ready)
     return count
 
 
 @numba.njit(**JIT)
 def _crease_edges_against(x0, x1, rows, cols, thickness, substeps, subs, shift, ai, aj, bi,
                           bj, fresh, fresh_blocks, dirty, pairs, sides, count, crease,
-                          b_boxes, near, counts, boxes):
+                          b_boxes, near, counts, boxes, seg_boxes, seg_ready):
     """
     Test patch A's creases against patch B's edges (see _edge_against and _patch_creases).
 
@@ -1183,8 +1224,8 @@ def _crease_edges_against(x0, x1, rows, cols, thickness, substeps, subs, shift, 
     with no point passing through or coming near a triangle (a cloth folded twice, where
     the second fold crosses the first, tangled so at 65 x 65). An edge with no end marked
     in ``fresh`` is tested only if B has a block marked in ``fresh_blocks`` (``dirty``).
-    ``b_boxes``, ``near``, ``counts`` and ``boxes``: as :func:`_free_edges_against` takes
-    them.
+    ``b_boxes``, ``near``, ``counts``, ``boxes``, ``seg_boxes`` and ``seg_ready``: as
+    :func:`_free_edges_against` takes them.
     """
     for r in range(ai * PATCH, min((ai + 1) * PATCH, rows - 1)):
         for c in range(aj * PATCH, min((aj + 1) * PATCH, cols - 1)):
@@ -1201,7 +1242,8 @@ def _crease_edges_against(x0, x1, rows, cols, thickness, substeps, subs, shift, 
                     continue
                 count = _edge_against(x0, x1, rows, cols, thickness, substeps, subs, shift,
                                       e, bi, bj, fresh, fresh_blocks, pairs, sides, count,
-                                      boxes, b_boxes, crease, near[block], counts[block])
+                                      boxes, b_boxes, crease, near[block], counts[block],
+                                      seg_boxes, seg_ready)
     return count
 
 
@@ -1209,6 +1251,12 @@ def _crease_edges_against(x0, x1, rows, cols, thickness, substeps, subs, shift, 
 def _triangle_normal(x, t, cols):
     """Return triangle t's normal, twice its area long (the vertices' order of _triangle)."""
     i, j, k = _triangle(t, cols)
+    return _normal_of(x, i, j, k)
+
+
+@numba.njit(**JIT)
+def _normal_of(x, i, j, k):
+    """Return the normal of triangle (i, j, k), twice its area long."""
     ex, ey, ez = x[0, j] - x[0, i], x[1, j] - x[1, i], x[2, j] - x[2, i]
     fx, fy, fz = x[0, k] - x[0, i], x[1, k] - x[1, i], x[2, k] - x[2, i]
     return ey * fz - ez * fy, ez * fx - ex * fz, ex * fy - ey * fx
@@ -1233,13 +1281,17 @@ def _patch_creases(x, rows, cols, bi, bj, cosine, bit, crease, normals):
     c0, c1 = bj * PATCH, min((bj + 1) * PATCH, cols - 1)
     lo_r, lo_c = max(r0 - 1, 0), max(c0 - 1, 0)
     # normals[cell row, cell column, triangle, (xyz, squared length)]
+    # (the vertices from the cell's corner: from a triangle's index, the two integer
+    # divisions a triangle were a quarter of the flags' time)
     for r in range(lo_r, r1):
         for c in range(lo_c, c1):
-            t = 2 * (r * (cols - 1) + c)
+            i = r * cols + c
             for half in range(2):
                 out = normals[r - lo_r, c - lo_c, half]
-                out[0], out[1], out[2] = _triangle_normal(x, t + half, cols)
-                out[3] = out[0] * out[0] + out[1] * out[1] + out[2] * out[2]
+                j, k = (i + 1, i + cols + 1) if half == 0 else (i + cols + 1, i + cols)
+                nx, ny, nz = _normal_of(x, i, j, k)
+                out[0], out[1], out[2] = nx, ny, nz
+                out[3] = nx * nx + ny * ny + nz * nz
     keep = ~np.uint8(bit)
     square = cosine * cosine
     for r in range(r0, r1):
@@ -1315,8 +1367,9 @@ def _detect(x0, x1, rows, cols, thickness, substeps, dirty, fresh, fresh_blocks,
     :func:`_edge_side`): a free edge can pass through another layer where no point
     passes through a triangle (a layer's corner hooked round another's edge); so can a
     sharp crease away from the border: each patch's creases (``crease``,
-    :func:`_patch_creases` at ``crease_cosine``, computed when the patch first meets
-    another and marked in ``crease_ready``) are tested against the other patch's edges. It
+    :func:`_patch_creases` at ``crease_cosine``, computed when the patch and another first
+    list blocks near each other and marked in ``crease_ready``) are tested against the
+    other patch's edges. It
     returns how many point-triangle and edge pairs were found (those beyond the arrays'
     capacity are not kept).
     """
@@ -1330,7 +1383,9 @@ def _detect(x0, x1, rows, cols, thickness, substeps, dirty, fresh, fresh_blocks,
     tri_boxes = np.empty((per * per, 2 * SUB * SUB, 6))
     tri_ready = np.empty(per * per, dtype=np.bool_)
     work, kept = np.empty((3, 6)), np.empty(per * per, dtype=np.int64)     # scratch
-    edge_boxes = np.empty((2, 6))
+    edge_boxes = np.empty((1, 6))
+    seg_boxes = np.empty((per * per, 5 * SUB * SUB, 6))
+    seg_ready = np.empty((per * per, 5 * SUB * SUB), dtype=np.bool_)
     creased = np.full((pr, pc), -1, dtype=np.int8)     # per patch: unknown, no, yes
     normals = np.empty((PATCH + 1, PATCH + 1, 2, 4))     # see _patch_creases
     # sweep and prune along x over the patches' boxes
@@ -1363,12 +1418,7 @@ def _detect(x0, x1, rows, cols, thickness, substeps, dirty, fresh, fresh_blocks,
                 if not ready[patch_i, patch_j]:
                     _sub_boxes(x0, x1, rows, cols, patch_i, patch_j, subs)
                     ready[patch_i, patch_j] = True
-                # the creases at the start (kept for the step's calls), then at the end
-                for time, x in enumerate((x0, x1)):
-                    if not crease_ready[patch_i, patch_j, time]:
-                        _patch_creases(x, rows, cols, patch_i, patch_j, crease_cosine,
-                                       time + 1, crease, normals)
-                        crease_ready[patch_i, patch_j, time] = True
+            flags = False
             # each way round: A's blocks' lists of the B blocks near them, then A's points
             # against B's triangles and A's free edges and creases against B's edges, on
             # those lists. Most ways round list nothing (the fold demo's layers at rest:
@@ -1380,15 +1430,24 @@ def _detect(x0, x1, rows, cols, thickness, substeps, dirty, fresh, fresh_blocks,
                     if a == b:
                         break
                     continue
+                if not flags:
+                    # the two patches' creases, once a way round lists blocks (A's edges
+                    # read B's flags): most pairs of patches whose boxes meet list none
+                    for patch_i2, patch_j2 in ((ai, aj), (bi, bj)):
+                        _creases_ready(x0, x1, rows, cols, patch_i2, patch_j2, crease_cosine,
+                                       crease, crease_ready, normals)
+                    flags = True
                 count = _points_against(x0, x1, rows, cols, thickness, substeps, subs, shift,
                                         patch_i, patch_j, other_i, other_j, fresh,
                                         fresh_blocks, pairs, sides, count, b_boxes, near,
                                         counts, tri_boxes, tri_ready, work)
+                seg_ready[:, :] = False     # (B's edges' boxes, in this pair's frame)
                 if patch_i == 0 or patch_i == pr - 1 or patch_j == 0 or patch_j == pc - 1:
                     edge_count = _free_edges_against(
                         x0, x1, rows, cols, thickness, substeps, subs, shift, patch_i,
                         patch_j, other_i, other_j, fresh, fresh_blocks, dirty, edge_pairs,
-                        edge_sides, edge_count, crease, b_boxes, near, counts, edge_boxes)
+                        edge_sides, edge_count, crease, b_boxes, near, counts, edge_boxes,
+                        seg_boxes, seg_ready)
                 # (most patches have no crease: their flags read once a detection)
                 if creased[patch_i, patch_j] < 0:
                     creased[patch_i, patch_j] = _has_creases(crease, rows, cols, patch_i,
@@ -1397,10 +1456,24 @@ def _detect(x0, x1, rows, cols, thickness, substeps, dirty, fresh, fresh_blocks,
                     edge_count = _crease_edges_against(
                         x0, x1, rows, cols, thickness, substeps, subs, shift, patch_i,
                         patch_j, other_i, other_j, fresh, fresh_blocks, dirty, edge_pairs,
-                        edge_sides, edge_count, crease, b_boxes, near, counts, edge_boxes)
+                        edge_sides, edge_count, crease, b_boxes, near, counts, edge_boxes,
+                        seg_boxes, seg_ready)
                 if a == b:
                     break
     return count, edge_count
+
+
+@numba.njit(**JIT)
+def _creases_ready(x0, x1, rows, cols, bi, bj, cosine, crease, crease_ready, normals):
+    """
+    Flag patch (bi, bj)'s creases at the start and at the end, where not yet done.
+
+    The start's are kept for the step's calls (``crease_ready``, :func:`_patch_creases`).
+    """
+    for time, x in enumerate((x0, x1)):
+        if not crease_ready[bi, bj, time]:
+            _patch_creases(x, rows, cols, bi, bj, cosine, time + 1, crease, normals)
+            crease_ready[bi, bj, time] = True
 
 
 @numba.njit(**JIT)
@@ -2430,7 +2503,7 @@ def patch_cache(rows, cols):
     pr, pc = (rows - 2) // PATCH + 1, (cols - 2) // PATCH + 1
     blocks = ((rows - 2) // SUB + 1, (cols - 2) // SUB + 1)
     return (np.empty((pr, pc, 6)), np.empty((pr, pc, 15)), np.empty((pr, pc, 4)),
-            np.zeros((pr, pc), dtype=np.bool_), np.empty(blocks + (15,)),
+            np.zeros((pr, pc), dtype=np.bool_), np.empty(blocks + (12,)),
             np.zeros((pr, pc), dtype=np.bool_), np.zeros(1),
             np.zeros(3 * rows * cols, dtype=np.uint8), np.zeros((pr, pc, 2), dtype=np.bool_),
             np.full(rows * cols, -1, dtype=np.int64))
@@ -2517,8 +2590,6 @@ def _still_sweeps(boxes, ends, subs, subs_ready, stale, reach):
                 for sj in range(bj * per, min((bj + 1) * per, subs.shape[1])):
                     for d in range(6):
                         subs[si, sj, d] = subs[si, sj, 6 + d]
-                    for d in range(3):
-                        subs[si, sj, 12 + d] = 0.0
 
 
 @numba.njit(**JIT)
