@@ -13,14 +13,14 @@ from conftest import load_tool
 from hcloth_ros.bench.self_contact import folded, GAP
 from hcloth_ros.core import ClothBuilder, Control, make_scene, make_solver, State
 from hcloth_ros.core import kernels
-from hcloth_ros.core.kernels.self_contact import (_edge_side, _fresh_blocks, _may_cross,
-                                                  _pair_side, _resolve, _resolve_passes,
-                                                  _triangle, BOXES_KEPT,
-                                                  BOXES_KEPT_NEW_START, BOXES_NEW, carry,
-                                                  CREASE_ANGLE, MAX_SUBSTEPS,
-                                                  MIN_SUBSTEPS, obstacle_supports, ON_EDGE,
-                                                  patch_cache, REACH, RESOLVE_PASSES, RING,
-                                                  SLACK, SUB)
+from hcloth_ros.core.kernels.self_contact import (_crease_cosine, _edge_side, _fresh_blocks,
+                                                  _may_cross, _pair_side, _patch_boxes,
+                                                  _patch_creases, _resolve, _resolve_passes,
+                                                  _triangle, BOXES_KEPT, BOXES_KEPT_NEW_START,
+                                                  BOXES_NEW, carry, CREASE_ANGLE, FLAT_COSINE,
+                                                  MAX_SUBSTEPS, MIN_SUBSTEPS, obstacle_supports,
+                                                  ON_EDGE, PATCH, patch_cache, REACH,
+                                                  RESOLVE_PASSES, RING, SLACK, SUB)
 from hcloth_ros.core.recovery import step_with_retries
 import numpy as np
 import pytest
@@ -613,6 +613,99 @@ def test_a_later_call_sees_a_point_pass_through_a_kept_patch_whose_sweep_fell():
                                  BOXES_KEPT_NEW_START, CREASE_ANGLE)
     assert later[0] >= moved.sum()
     assert violations(clean, q, THICKNESS) == (0, 0)
+
+
+def test_a_cell_folded_flat_on_its_diagonal_keeps_its_patch_tested_against_itself():
+    """
+    A patch with a degenerate cell (its normal zero) counts it as a cosine of 0 in its cone.
+
+    A flat 9 x 9 sheet with point (4, 3) laid on point (3, 4) at the start: cell (3, 3)
+    folded flat onto its diagonal, one of its triangles on the other. Its normal is zero,
+    which the cone takes as perpendicular to the patch's axis, so the patch is not culled
+    as flat (``FLAT_COSINE``) and its points are tested against its own triangles. The
+    squared test that spares most cells their unit normal (2026-11-30, session 38) skipped
+    such a cell at first, and the cone said the patch was flat.
+    """
+    rows = cols = 9
+    x = np.zeros((3, rows, cols))
+    x[0], x[1] = np.meshgrid(np.arange(cols) * 0.01, np.arange(rows) * 0.01)
+    x0 = x.copy()
+    x0[:, 4, 3] = x0[:, 3, 4]
+    cache = patch_cache(rows, cols)
+    boxes, ends, cones = cache[0], cache[1], cache[2]
+    stale = np.ones(boxes.shape[:2], dtype=np.bool_)
+    _patch_boxes(x0.reshape(3, -1), x.reshape(3, -1), rows, cols, PATCH, THICKNESS, boxes,
+                 ends, cones, stale)
+    assert cones[0, 0, 3] == 0.0 and cones[0, 0, 3] < FLAT_COSINE
+    _patch_boxes(x.reshape(3, -1), x.reshape(3, -1), rows, cols, PATCH, THICKNESS, boxes,
+                 ends, cones, stale)
+    assert cones[0, 0, 3] == 1.0        # the same sheet unfolded: flat
+
+
+def test_a_patchs_crease_flags_kept_by_a_later_call_are_those_of_the_end():
+    """
+    The crease flags a later call keeps for a patch are those at the end, on its first row too.
+
+    The folded cloth's top layer comes down from 2.05 to 1.05 thicknesses above the bottom
+    one: the first call finds nothing and pushes nothing, but flags the creases of the
+    patches whose boxes come near (none: both layers are flat). A later call is told that
+    a few points of the bottom layer's row 7 (the last row of the patches above) moved
+    down 12 mm, and a few of the top layer above them 0.02 thicknesses down: nothing comes
+    near. The edges along row 8, the first row of the bottom layer's second patches, now
+    bend by about 21 degrees: their triangles above are the row above's. Their patch
+    moved no point, so until 2026-11-30 (session 38) it kept the first call's flags
+    (flat) as those of the end, to be tested by them wherever it met the top layer's
+    moved points; now a patch's flags go out of date with the patches above it and on
+    its left too (:func:`~hcloth_ros.core.kernels.self_contact._flags_stale`), and every
+    patch's flags marked ready after the call are those a fresh computation at the end
+    gives.
+    """
+    model = folded_model(ground=None)
+    lv = model.level(model.level_count - 1)
+    end = folded_state(model, 0.5).q[-1]
+    rows, cols = lv.shape
+    top = slice(rows // 2 + 1, None)
+    end[2, top] -= GAP - 1.05 * THICKNESS
+    end[0, top] += 0.3 * lv.du          # off the bottom's grid points
+    start = end.copy()
+    start[2, top] += THICKNESS
+    qd = np.zeros_like(end)
+    qd[2, top] = -THICKNESS / H
+    cache = patch_cache(*lv.shape)
+    crease, crease_ready = cache[7], cache[8]
+    hold, support = np.zeros(lv.shape, dtype=np.int8), _no_support(lv)
+    first = kernels.self_contact(end, qd, np.zeros_like(end), start, start, lv.mass, hold,
+                                 np.ones(lv.shape, dtype=np.bool_), support, THICKNESS, 0.0,
+                                 4, H, 10.0, UP, *cache, BOXES_NEW, CREASE_ANGLE)
+    assert first[0] == 0 and first[3]
+    assert crease_ready[1, 1, 1]        # the bottom layer's patch holding rows 8-15
+    columns = np.arange(9, 14)
+    row_edges = 3 * (8 * cols + columns)        # along row 8 (d = 0)
+    assert not (crease[row_edges] & 2).any()
+    moved = np.zeros(lv.shape, dtype=np.bool_)
+    moved[7, columns] = True
+    end[2, 7, columns] -= 0.012
+    over = rows - 1 - 8                             # the top layer's row above row 8
+    moved[over - 1:over + 2, columns] = True
+    end[2, over - 1:over + 2, columns] -= 0.02 * THICKNESS
+    later = kernels.self_contact(end, qd, np.zeros_like(end), start, start, lv.mass, hold,
+                                 moved, support, THICKNESS, 0.0, 4, H, 10.0, UP, *cache,
+                                 BOXES_KEPT, CREASE_ANGLE)
+    assert later[0] == 0 and later[3]
+    assert np.degrees(np.arctan2(0.012, lv.dv)) > 15.0
+    fresh = np.zeros_like(crease)
+    cosine = _crease_cosine(THICKNESS, cache[6][0], CREASE_ANGLE)
+    normals = np.empty((PATCH + 1, PATCH + 1, 2, 4))
+    x = end.reshape(3, -1)
+    for bi, bj in zip(*np.nonzero(crease_ready[:, :, 1])):
+        _patch_creases(x, rows, cols, bi, bj, cosine, 2, fresh, normals)
+        r0, c0 = bi * PATCH, bj * PATCH
+        for r in range(r0, min(r0 + PATCH, rows - 1)):
+            edges = 3 * (r * cols + np.arange(c0, min(c0 + PATCH, cols - 1)))
+            for d in range(3):
+                assert np.array_equal(crease[edges + d] & 2, fresh[edges + d] & 2), (bi, bj)
+    _patch_creases(x, rows, cols, 1, 1, cosine, 2, fresh, normals)
+    assert (fresh[row_edges] & 2).all()     # they are creases at the end
 
 
 @pytest.mark.parametrize('rows, cols', [(2, 2), (3, 3), (4, 9), (33, 17), (129, 129)])

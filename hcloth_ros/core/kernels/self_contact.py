@@ -98,10 +98,13 @@ import numpy as np
 # ended, at the new start and at the end alike (with a new start, its boxes are cut down
 # to where they ended and its motion to none, :func:`_still_sweeps`: the frame a pair's
 # boxes are taken in moves by the patches' motion, and a swept box kept with its motion
-# held the points' end, not their start). So do its creases' flags at the step's
-# start and at the end (an edge creased at either is tested: more tests, none missed); the
-# stale patches take their start's flags anew. The longest edge stays the step's start's
-# (strain limiting keeps edges near it)
+# held the points' end, not their start). So do its creases' flags, made at a path's start
+# and at its end where the patch first lists blocks near another's (a patch not stale kept
+# them from an earlier call, its start's from the step's start or a later start it
+# had not moved since: an edge creased at either is tested, more tests, none missed); the
+# stale patches, and those whose first row's or column's edges border one, take their
+# start's flags anew. The longest edge stays the step's start's (strain limiting keeps
+# edges near it)
 BOXES_NEW, BOXES_KEPT, BOXES_KEPT_NEW_START = 0, 1, 2
 
 # Fewest and most sub-intervals of a step the crossing tests use (two: the distance to a
@@ -505,6 +508,8 @@ def _below(x, a, b, c, d, ax, ay, az, low):
     False only where it is not, with a margin (``1e-12``) far above the rounding of the
     cosine :func:`_quad_normal`'s unit normal gives, without its square root and
     divisions: the cosine of the normal ``n`` is ``n . a / |n|``, compared squared. A
+    degenerate cell (its normal zero: cosine 0 there) and one whose squares leave the
+    floating-point range always may. A
     patch's cone takes the smallest over its cells, and most cells do not lower it (the
     root and the divisions of each cell's unit normal were a third of a step's boxes).
     """
@@ -512,8 +517,11 @@ def _below(x, a, b, c, d, ax, ay, az, low):
     fx, fy, fz = x[0, c] - x[0, b], x[1, c] - x[1, b], x[2, c] - x[2, b]
     nx, ny, nz = ey * fz - ez * fy, ez * fx - ex * fz, ex * fy - ey * fx
     dot = nx * ax + ny * ay + nz * az
+    nn = nx * nx + ny * ny + nz * nz
+    if not 1e-280 < nn < 1e280:
+        return True
     bound = low + 1e-12
-    square = (nx * nx + ny * ny + nz * nz) * bound * bound
+    square = nn * bound * bound
     # dot < bound |n|
     if bound > 0.0:
         return not (dot >= 0.0 and dot * dot >= square)
@@ -1095,9 +1103,9 @@ def _edge_against(x0, x1, rows, cols, thickness, substeps, subs, shift, e, bi, b
     its box holds e's path): looping over all of B's blocks instead was 87,000 box tests a
     detection, 2 % of them met, on the folded drop's landing at 129 x 129.
     ``seg_boxes[m, 5 c + d]``: the box B's listed block m's edge d of its cell c (row-major
-    in the block; d as ``CELL_EDGES``) sweeps, made at its first test in this pair and
-    marked in ``seg_ready`` (each is tested by every crease near it: made once a test,
-    they were a third of the edge tests' time on the folded drop).
+    in the block; d as ``CELL_EDGES``) sweeps, made at its first test in this way round of
+    the pair and marked in ``seg_ready`` (made once a test, they were a third of the edge
+    tests' time on the folded drop).
     """
     a, b = _edge(e, cols)
     free = _on_border(a, b, rows, cols)
@@ -1359,7 +1367,7 @@ def _detect(x0, x1, rows, cols, thickness, substeps, dirty, fresh, fresh_blocks,
     the last detection), and in them only the pairs with a point marked in ``fresh``
     (after a response, the points of the pairs it moved; the other pairs of those patches
     were apart at the last detection and have not moved since; ``fresh_blocks``: see
-    :func:`_fresh_blocks`). ``subs`` holds the blocks' boxes (:func:`_block_boxes`) of
+    :func:`_fresh_blocks`). ``subs`` holds the blocks' boxes (:func:`_sub_boxes`) of
     the patches marked in ``ready``; the others' are computed when a patch first meets
     another one and marked: a step's later calls keep those of the patches where nothing
     moved. In the pairs of patches along the grid's border, the free edges are tested
@@ -1368,8 +1376,9 @@ def _detect(x0, x1, rows, cols, thickness, substeps, dirty, fresh, fresh_blocks,
     passes through a triangle (a layer's corner hooked round another's edge); so can a
     sharp crease away from the border: each patch's creases (``crease``,
     :func:`_patch_creases` at ``crease_cosine``, computed when the patch and another first
-    list blocks near each other and marked in ``crease_ready``) are tested against the
-    other patch's edges. It
+    list blocks near each other and marked in ``crease_ready``, which the step's later
+    calls keep where the patch and the patches above and on the left of it did not go
+    stale: see ``BOXES_KEPT_NEW_START``) are tested against the other patch's edges. It
     returns how many point-triangle and edge pairs were found (those beyond the arrays'
     capacity are not kept).
     """
@@ -1474,6 +1483,23 @@ def _creases_ready(x0, x1, rows, cols, bi, bj, cosine, crease, crease_ready, nor
         if not crease_ready[bi, bj, time]:
             _patch_creases(x, rows, cols, bi, bj, cosine, time + 1, crease, normals)
             crease_ready[bi, bj, time] = True
+
+
+@numba.njit(**JIT)
+def _flags_stale(crease_ready, time, stale):
+    """
+    Mark the crease flags at ``time`` (0 start, 1 end) out of date where ``stale`` round them.
+
+    The patches marked and those below and to the right of one: a patch's flags on its
+    first row's and first column's edges take the bend from the triangles of the cells
+    above and on the left (:func:`_patch_creases`), points of the patches there.
+    """
+    pr, pc = stale.shape
+    for bi in range(pr):
+        for bj in range(pc):
+            if stale[bi, bj] or (bi > 0 and stale[bi - 1, bj]) or \
+                    (bj > 0 and stale[bi, bj - 1]):
+                crease_ready[bi, bj, time] = False
 
 
 @numba.njit(**JIT)
@@ -2077,7 +2103,7 @@ def self_contact(
     # of a position the point has left again, even for its start)
     stale = np.ones_like(dirty) if reuse == BOXES_NEW else dirty | touched
     if reuse == BOXES_KEPT_NEW_START:
-        crease_ready[:, :, 0] &= ~stale
+        _flags_stale(crease_ready, 0, stale)
     touched[:, :] = False
     if subs.shape[:2] != fresh_blocks.shape or crease.shape[0] != 3 * n:
         raise ValueError('self_contact: the block cache does not fit the level')
@@ -2124,9 +2150,9 @@ def _rounds(x0, xs, x1, qd, dv, inv_mass, support, rows, cols, thickness, fricti
         # pushing a pair apart can bring a point near another triangle: detect again
         _patch_boxes(x0, x1, rows, cols, PATCH, thickness, boxes, ends, cones, stale)
         subs_ready &= ~stale
-        crease_ready[:, :, 1] &= ~stale
+        _flags_stale(crease_ready, 1, stale)
         if surface:
-            crease_ready[:, :, 0] &= ~stale
+            _flags_stale(crease_ready, 0, stale)
         found, edges_found = _detect(x0, x1, rows, cols, thickness, substeps, dirty, fresh,
                                      fresh_blocks, pairs, sides, edge_pairs, edge_sides,
                                      boxes, ends, cones, subs, subs_ready, crease,
@@ -2567,7 +2593,7 @@ def _still_sweeps(boxes, ends, subs, subs_ready, stale, reach):
     such a patch have not moved since its boxes were swept, so they start and end where
     that sweep ended. Its boxes (:func:`_patch_boxes`, ``boxes`` grown by ``reach``) and
     its blocks' (``subs``, where ``subs_ready``) become their end's, at both ends, and
-    their motion none. Kept whole, a sweep's motion moved the frame a pair's boxes are
+    the patch's motion none. Kept whole, a sweep's motion moved the frame a pair's boxes are
     taken in (:func:`_moving_box`), and its start box, shifted with it, need not hold the
     points' start: a patch that fell a centimetre in the sweep lay, in that frame, half a
     centimetre from its points at the start of the call.
