@@ -2,7 +2,7 @@
 Self-contact's kernel calls of the folded drop captured, then replayed alone: time and result.
 
     .venv/bin/python tools/self_contact_replay.py [--size 129] [--steps 61:100] \
-        [--repeats 3] [--save FILE | --load FILE] [--edges creases|sharp|all]
+        [--repeats 3] [--save FILE | --load FILE] [--edges creases|sharp|all] [--chained]
 
 Runs the contact bench's folded drop (``multigrid``, thickness 4 mm, one numba thread),
 keeps a copy of every argument of each finest-level kernel call in the steps asked for
@@ -12,10 +12,16 @@ limiting moved), then runs each call again ``--repeats`` times on fresh copies a
 its fastest. Prints the time of the
 calls in all, the median and mean of a step's calls, the same for the steps' first calls
 and for their later ones, and a digest of what the calls wrote (positions, velocities,
-velocity changes): a change to the kernel that gives the same digest gave the same
-result on every call. The steps' work is the same for every version of the kernel,
-where ``tools/self_contact_calls.py`` follows each version's own motion (a different bit
-in a chaotic drop changes which steps are in contact, and so the medians). ``--save``
+velocity changes) and returned (pair counts, sub-intervals, pairs dropped, whether it
+ended clean; until 2026-11-30, session 38, the digest held only what they wrote): a change
+to the kernel that gives the same digest gave the same result on every call. Each call
+starts from the cache (boxes, flags, what lies on what) its capture held, so the digest
+shows what one call does, not what it leaves to the next; ``--chained`` gives a step's
+later calls the cache the replay of its call before left instead (their positions stay
+the captured ones), so that what a call keeps for the next counts too. The steps' work
+is the same for every version of the kernel, where ``tools/self_contact_calls.py``
+follows each version's own motion (a different bit in a chaotic drop changes which steps
+are in contact, and so the medians). ``--save``
 writes the captured calls (about 3 MB a call at 129 x 129) for another version to
 ``--load``: run the tool with ``PYTHONPATH`` pointing at each version's tree.
 ``--edges`` replays the calls with that setting's crease angle instead of the captured one
@@ -63,21 +69,37 @@ def capture(size, first, last):
     return calls
 
 
-def replay(calls, repeats):
-    """Run each call ``repeats`` times; return its fastest times and the outputs' digest."""
+# Where a call's arguments hold the patch cache (boxes .. the triangles points lie on) and
+# the reuse flag that says which of it a call may keep (see kernels.self_contact)
+CACHE = slice(15, 25)
+REUSE = 25
+
+
+def replay(calls, repeats, chained=False):
+    """
+    Run each call ``repeats`` times; return its fastest times and the results' digest.
+
+    ``chained``: a call that may keep its step's cache (not a step's first) takes the one
+    the replay of the call before it left.
+    """
     kernel = importlib.import_module('hcloth_ros.core.kernels.self_contact').self_contact
     digest = hashlib.sha1()
-    best = []
+    best, left = [], None
     for _, arguments in calls:
         times = []
+        if chained and left is not None and arguments[REUSE]:
+            arguments = list(arguments)
+            arguments[CACHE] = left
         for _ in range(repeats):
             copies = [a.copy() if isinstance(a, np.ndarray) else a for a in arguments]
             start = time.perf_counter()
-            kernel(*copies)
+            result = kernel(*copies)
             times.append(time.perf_counter() - start)
         best.append(min(times))
+        left = copies[CACHE]
         for written in copies[:3]:      # q, qd, dv
             digest.update(written.tobytes())
+        digest.update(repr(tuple(int(v) for v in result)).encode())
     return np.array(best), digest.hexdigest()[:12]
 
 
@@ -115,6 +137,8 @@ def main(argv=None):
     store.add_argument('--load', help='replay the calls of this file instead of capturing')
     parser.add_argument('--edges', choices=('creases', 'sharp', 'all'),
                         help="replay with this self-contact edges setting's crease angle")
+    parser.add_argument('--chained', action='store_true',
+                        help="give a step's later calls the cache the call before left")
     args = parser.parse_args(argv)
     numba.set_num_threads(1)
     if args.load:
@@ -134,7 +158,7 @@ def main(argv=None):
         calls = [(step, arguments[:-1] + [CREASE_ANGLES[args.edges]])
                  for step, arguments in calls]
     replay(calls[:1], 1)        # compiled or loaded before the timing
-    seconds, digest = replay(calls, args.repeats)
+    seconds, digest = replay(calls, args.repeats, args.chained)
     print(f'{len(calls)} calls in {len(per_step(calls, seconds, None))} steps, '
           f'{1e3 * seconds.sum():.1f} ms in all (fastest of {args.repeats} each); '
           f'digest {digest}')
