@@ -467,7 +467,7 @@ def _patch_boxes(x0, x1, rows, cols, size, thickness, boxes, ends, cones, stale)
                                       r1 * cols + c1)
             cone[0], cone[1], cone[2] = ax, ay, az
             low = 1.0 if ax * ax + ay * ay + az * az > 0.0 else -1.0
-            _block_boxes(x0, x1, r0, r1, c0, c1, cols, ends[bi, bj])
+            _block_boxes(x0, x1, r0, r1, c0, c1, cols, ends, bi, bj, True)
             for d in range(3):
                 box[d] = min(ends[bi, bj, d], ends[bi, bj, 6 + d])
                 box[3 + d] = max(ends[bi, bj, 3 + d], ends[bi, bj, 9 + d])
@@ -475,8 +475,9 @@ def _patch_boxes(x0, x1, rows, cols, size, thickness, boxes, ends, cones, stale)
                 for x in (x0, x1):
                     for c in range(c0, c1):
                         i = r * cols + c
-                        if _below(x, i, i + 1, i + cols, i + cols + 1, ax, ay, az, low):
-                            nx, ny, nz = _quad_normal(x, i, i + 1, i + cols, i + cols + 1)
+                        nx, ny, nz = _quad_cross(x, i, i + 1, i + cols, i + cols + 1)
+                        if _below(nx, ny, nz, ax, ay, az, low):
+                            nx, ny, nz = _unit(nx, ny, nz)
                             low = min(low, nx * ax + ny * ay + nz * az)
             for d in range(3):
                 box[d] -= thickness
@@ -491,31 +492,40 @@ def _quad_normal(x, a, b, c, d):
 
     From its diagonals a-d and b-c (0 if degenerate).
     """
+    nx, ny, nz = _quad_cross(x, a, b, c, d)
+    return _unit(nx, ny, nz)
+
+
+@numba.njit(**INLINE)
+def _quad_cross(x, a, b, c, d):
+    """Return the cross product of quadrilateral a, b, c, d's diagonals a-d and b-c."""
     ex, ey, ez = x[0, d] - x[0, a], x[1, d] - x[1, a], x[2, d] - x[2, a]
     fx, fy, fz = x[0, c] - x[0, b], x[1, c] - x[1, b], x[2, c] - x[2, b]
-    nx, ny, nz = ey * fz - ez * fy, ez * fx - ex * fz, ex * fy - ey * fx
+    return ey * fz - ez * fy, ez * fx - ex * fz, ex * fy - ey * fx
+
+
+@numba.njit(**INLINE)
+def _unit(nx, ny, nz):
+    """Return ``n`` scaled to unit length (0 if it has none)."""
     norm = math.sqrt(nx * nx + ny * ny + nz * nz)
     if not norm > 0.0:
         return 0.0, 0.0, 0.0
     return nx / norm, ny / norm, nz / norm
 
 
-@numba.njit(**JIT)
-def _below(x, a, b, c, d, ax, ay, az, low):
+@numba.njit(**INLINE)
+def _below(nx, ny, nz, ax, ay, az, low):
     """
-    Whether the cosine of quadrilateral a, b, c, d's normal and unit ``a*`` may be under ``low``.
+    Whether the cosine between a cell's normal ``n`` and the unit ``a*`` may be under ``low``.
 
     False only where it is not, with a margin (``1e-12``) far above the rounding of the
-    cosine :func:`_quad_normal`'s unit normal gives, without its square root and
-    divisions: the cosine of the normal ``n`` is ``n . a / |n|``, compared squared. A
-    degenerate cell (its normal zero: cosine 0 there) and one whose squares leave the
-    floating-point range always may. A
-    patch's cone takes the smallest over its cells, and most cells do not lower it (the
-    root and the divisions of each cell's unit normal were a third of a step's boxes).
+    cosine the unit normal (:func:`_unit`) gives, without its square root and divisions:
+    the cosine of the normal ``n`` is ``n . a / |n|``, compared squared. A degenerate
+    cell (its normal zero: cosine 0 there) and one whose squares leave the floating-point
+    range always may. A patch's cone takes the smallest over its cells, and most cells do
+    not lower it (the root and the divisions of each cell's unit normal were a third of a
+    step's boxes).
     """
-    ex, ey, ez = x[0, d] - x[0, a], x[1, d] - x[1, a], x[2, d] - x[2, a]
-    fx, fy, fz = x[0, c] - x[0, b], x[1, c] - x[1, b], x[2, c] - x[2, b]
-    nx, ny, nz = ey * fz - ez * fy, ez * fx - ex * fz, ex * fy - ey * fx
     dot = nx * ax + ny * ay + nz * az
     nn = nx * nx + ny * ny + nz * nz
     if not 1e-280 < nn < 1e280:
@@ -642,16 +652,18 @@ def _cone_angles(cones):
     return out
 
 
-@numba.njit(**JIT)
-def _block_boxes(x0, x1, r0, r1, c0, c1, cols, out):
+@numba.njit(**INLINE)
+def _block_boxes(x0, x1, r0, r1, c0, c1, cols, table, ti, tj, motion):
     """
     Write the boxes of a block of grid points at both ends of the step and its motion.
 
     Rows ``r0 .. r1`` by columns ``c0 .. c1`` (inclusive):
-    ``out = (min, max at x0, min, max at x1, mean displacement)``.
+    ``table[ti, tj] = (min, max at x0, min, max at x1, mean displacement)``, the last
+    three only if ``motion`` (a patch's, read for a pair's frame; not a block's). The table
+    and the indices, not the row: a row passed is a view built for each block.
     """
-    # a coordinate at a time in local variables (kept in ``out`` through the loop, the
-    # blocks' boxes of a whole 129 x 129 level took 0.25 ms, now 0.20)
+    # a coordinate at a time in local variables (kept in the row through the loop, the
+    # blocks' boxes of a whole 129 x 129 level took 0.25 ms, now 0.14-0.16 without the motion)
     for d in range(3):
         low0, high0, low1, high1, move = np.inf, -np.inf, np.inf, -np.inf, 0.0
         for r in range(r0, r1 + 1):
@@ -659,9 +671,12 @@ def _block_boxes(x0, x1, r0, r1, c0, c1, cols, out):
                 i = r * cols + c
                 low0, high0 = min(low0, x0[d, i]), max(high0, x0[d, i])
                 low1, high1 = min(low1, x1[d, i]), max(high1, x1[d, i])
-                move += x1[d, i] - x0[d, i]
-        out[d], out[3 + d], out[6 + d], out[9 + d] = low0, high0, low1, high1
-        out[12 + d] = move / ((r1 - r0 + 1) * (c1 - c0 + 1))
+                if motion:
+                    move += x1[d, i] - x0[d, i]
+        table[ti, tj, d], table[ti, tj, 3 + d] = low0, high0
+        table[ti, tj, 6 + d], table[ti, tj, 9 + d] = low1, high1
+        if motion:
+            table[ti, tj, 12 + d] = move / ((r1 - r0 + 1) * (c1 - c0 + 1))
 
 
 @numba.njit(**JIT)
@@ -697,24 +712,15 @@ def _sub_boxes(x0, x1, rows, cols, bi, bj, subs):
 
     A point tests only the triangles of the blocks its path comes near: 16 boxes and a
     few blocks' triangles where the whole patch's 128 triangles cost 4x more on a cloth
-    lying on itself. ``subs[si, sj] = (min, max at x0, min, max at x1)``, as
-    :func:`_block_boxes` without the motion (a pair's frame moves with its two patches'
+    lying on itself. ``subs[si, sj] = (min, max at x0, min, max at x1)``
+    (:func:`_block_boxes` without the motion: a pair's frame moves with its two patches'
     motion, :func:`_detect`, not with a block's).
     """
     per = PATCH // SUB
     for si in range(bi * per, min((bi + 1) * per, subs.shape[0])):
-        r0, r1 = si * SUB, min((si + 1) * SUB, rows - 1)
         for sj in range(bj * per, min((bj + 1) * per, subs.shape[1])):
-            c0, c1 = sj * SUB, min((sj + 1) * SUB, cols - 1)
-            for d in range(3):
-                low0, high0, low1, high1 = np.inf, -np.inf, np.inf, -np.inf
-                for r in range(r0, r1 + 1):
-                    for c in range(c0, c1 + 1):
-                        i = r * cols + c
-                        low0, high0 = min(low0, x0[d, i]), max(high0, x0[d, i])
-                        low1, high1 = min(low1, x1[d, i]), max(high1, x1[d, i])
-                subs[si, sj, d], subs[si, sj, 3 + d] = low0, high0
-                subs[si, sj, 6 + d], subs[si, sj, 9 + d] = low1, high1
+            _block_boxes(x0, x1, si * SUB, min((si + 1) * SUB, rows - 1), sj * SUB,
+                         min((sj + 1) * SUB, cols - 1), cols, subs, si, sj, False)
 
 
 @numba.njit(**JIT)
