@@ -17,7 +17,7 @@ Held points are not unknowns: their new position is their target and ``v+`` the
 velocity that reaches it, ``(target - x^) / beta``.
 """
 
-from hcloth_ros.core.kernels.jit import JIT
+from hcloth_ros.core.kernels.jit import BORROW, JIT
 from hcloth_ros.core.kernels.layout import FREE, PINNED, row3, STENCIL_DC, STENCIL_DR, stencil_span
 from hcloth_ros.core.kernels.springs import force_row, spring_vector
 import numba
@@ -80,7 +80,7 @@ def start_velocity(qd, h, gravity, v_hat, prescribed_dv, hold_kind, v):
                               else v_hat[d, r, c] + prescribed_dv[d, r, c])
 
 
-@numba.njit(**JIT)
+@numba.njit(**BORROW)
 def _damping_row(x, v, r, springs, damping, fx, fy, fz):
     """
     Add spring damping ``d ((v_j - v_i) . u) u`` of row r's springs (N).

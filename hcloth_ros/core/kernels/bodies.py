@@ -20,7 +20,7 @@ velocity zero) is still dragged by a body pressing it.
 import math
 
 from hcloth_ros.core.kernels.contact import _movable
-from hcloth_ros.core.kernels.jit import JIT
+from hcloth_ros.core.kernels.jit import BORROW, JIT
 
 import numba
 import numpy as np
@@ -33,7 +33,7 @@ KIND, FRICTION, SIZE, R_END, T_END, R_START, T_START = 0, 1, 2, 5, 14, 17, 26
 ROW = 29
 
 
-@numba.njit(**JIT)
+@numba.njit(**BORROW)
 def _to_local(b, rot, tr, x, y, z):
     """Return ``R^T (p - t)`` for the pose at offsets ``rot`` and ``tr`` of row b."""
     dx, dy, dz = x - b[tr], y - b[tr + 1], z - b[tr + 2]
@@ -42,7 +42,7 @@ def _to_local(b, rot, tr, x, y, z):
             b[rot + 2] * dx + b[rot + 5] * dy + b[rot + 8] * dz)
 
 
-@numba.njit(**JIT)
+@numba.njit(**BORROW)
 def _to_local_direction(b, x, y, z):
     """Return ``R^T v`` for the rotation at the end of the step of row b."""
     return (b[R_END] * x + b[R_END + 3] * y + b[R_END + 6] * z,
@@ -50,7 +50,7 @@ def _to_local_direction(b, x, y, z):
             b[R_END + 2] * x + b[R_END + 5] * y + b[R_END + 8] * z)
 
 
-@numba.njit(**JIT)
+@numba.njit(**BORROW)
 def _rotate(b, rot, x, y, z):
     """Return ``R l`` for the rotation at offset ``rot`` of row b."""
     return (b[rot] * x + b[rot + 1] * y + b[rot + 2] * z,
@@ -58,7 +58,7 @@ def _rotate(b, rot, x, y, z):
             b[rot + 6] * x + b[rot + 7] * y + b[rot + 8] * z)
 
 
-@numba.njit(**JIT)
+@numba.njit(**BORROW)
 def _reach(b):
     """Radius of a sphere around the body's origin that holds the whole body."""
     kind = int(b[KIND])
@@ -69,7 +69,7 @@ def _reach(b):
     return b[SIZE] + b[SIZE + 1]
 
 
-@numba.njit(**JIT)
+@numba.njit(**BORROW)
 def _grown_reach(b, grow):
     """
     Radius of a sphere around the body's origin that holds the body grown by ``grow``.
@@ -85,7 +85,7 @@ def _grown_reach(b, grow):
     return _reach(b) + grow
 
 
-@numba.njit(**JIT)
+@numba.njit(**BORROW)
 def _off_core(b, x, y, z):
     """Return a local point minus the nearest point of a round body's core (centre, axis)."""
     if int(b[KIND]) == CAPSULE:
@@ -93,13 +93,13 @@ def _off_core(b, x, y, z):
     return x, y, z
 
 
-@numba.njit(**JIT)
+@numba.njit(**BORROW)
 def _inside_round(b, radius, x, y, z):
     ox, oy, oz = _off_core(b, x, y, z)
     return ox * ox + oy * oy + oz * oz < radius * radius
 
 
-@numba.njit(**JIT)
+@numba.njit(**BORROW)
 def _round_exit(b, margin, lx, ly, lz, sx, sy, sz):
     """
     Local unit normal and depth of a point inside a sphere or capsule (0 depth: outside).
@@ -134,7 +134,7 @@ def _round_exit(b, margin, lx, ly, lz, sx, sy, sz):
     return nx, ny, nz, _exit_along(b, margin, lx, ly, lz, nx, ny, nz)
 
 
-@numba.njit(**JIT)
+@numba.njit(**BORROW)
 def _box_exit(b, margin, lx, ly, lz, sx, sy, sz):
     """
     Local unit normal and depth of a point inside the box (0 depth: outside).
@@ -168,7 +168,7 @@ def _box_exit(b, margin, lx, ly, lz, sx, sy, sz):
             sign if axis == 2 else 0.0, depth)
 
 
-@numba.njit(**JIT)
+@numba.njit(**BORROW)
 def _exit(b, margin, lx, ly, lz, sx, sy, sz):
     """Local unit normal and depth of a point inside body row b (0 depth: outside)."""
     if int(b[KIND]) == BOX:
@@ -176,7 +176,7 @@ def _exit(b, margin, lx, ly, lz, sx, sy, sz):
     return _round_exit(b, margin, lx, ly, lz, sx, sy, sz)
 
 
-@numba.njit(**JIT)
+@numba.njit(**BORROW)
 def _push(q, r, c, b, depth, nx, ny, nz):
     """Move point (r, c) ``depth`` along the local normal n; return n in the world."""
     nx, ny, nz = _rotate(b, R_END, nx, ny, nz)
@@ -186,7 +186,7 @@ def _push(q, r, c, b, depth, nx, ny, nz):
     return nx, ny, nz
 
 
-@numba.njit(**JIT)
+@numba.njit(**BORROW)
 def _exit_along(b, margin, lx, ly, lz, vx, vy, vz):
     """
     Distance from local point l, inside body b (grown by margin), to its surface along v.
@@ -221,7 +221,7 @@ def _exit_along(b, margin, lx, ly, lz, vx, vy, vz):
     return outside
 
 
-@numba.njit(**JIT)
+@numba.njit(**BORROW)
 def _pressed(q, r, c, b, planes, margin, lx, ly, lz):
     """
     How deep body b presses point (r, c) into a plane it lies on, and the plane's normal.
@@ -249,7 +249,7 @@ def _pressed(q, r, c, b, planes, margin, lx, ly, lz):
     return deepest, nx, ny, nz
 
 
-@numba.njit(**JIT)
+@numba.njit(**BORROW)
 def _carried(b, ox, oy, oz):
     """How far body b carried its surface point at local o over the step (world)."""
     ex, ey, ez = _rotate(b, R_END, ox, oy, oz)
@@ -258,7 +258,7 @@ def _carried(b, ox, oy, oz):
             ez + b[T_END + 2] - sz - b[T_START + 2])
 
 
-@numba.njit(**JIT)
+@numba.njit(**BORROW)
 def _rub(q, qd, dv, q_prev, r, c, n, carried, budget, dt):
     """
     Friction between point (r, c) and a surface of normal n that moved by ``carried``.
@@ -286,7 +286,7 @@ def _rub(q, qd, dv, q_prev, r, c, n, carried, budget, dt):
         qd[d, r, c] = new
 
 
-@numba.njit(**JIT)
+@numba.njit(**BORROW)
 def _respond(q, qd, dv, q_prev, r, c, b, h, dt, planes, plane_friction, margin,
              lx, ly, lz, sx, sy, sz):
     """
@@ -332,7 +332,7 @@ def _respond(q, qd, dv, q_prev, r, c, b, h, dt, planes, plane_friction, margin,
     return True
 
 
-@numba.njit(**JIT)
+@numba.njit(**BORROW)
 def _inside(b, margin, lx, ly, lz):
     """Whether local point l is inside body b grown by margin."""
     if int(b[KIND]) == BOX:
@@ -341,7 +341,7 @@ def _inside(b, margin, lx, ly, lz):
     return _inside_round(b, b[SIZE] + margin, lx, ly, lz)
 
 
-@numba.njit(**JIT)
+@numba.njit(**BORROW)
 def _beyond_box(b, margin, lx, ly, lz, sx, sy, sz):
     """
     Whether the path from s to l (body frame) stays out of the grown body's local box.
@@ -362,7 +362,7 @@ def _beyond_box(b, margin, lx, ly, lz, sx, sy, sz):
             or min(lz, sz) > hz + margin or max(lz, sz) < -hz - margin)
 
 
-@numba.njit(**JIT)
+@numba.njit(**BORROW)
 def _first_inside(b, margin, sx, sy, sz, lx, ly, lz):
     """
     Fraction of the path from s to l (body frame) where it is first inside b, or -1.
@@ -383,7 +383,7 @@ def _first_inside(b, margin, sx, sy, sz, lx, ly, lz):
     return -1.0
 
 
-@numba.njit(**JIT)
+@numba.njit(**BORROW)
 def _far(lx, ly, lz, sx, sy, sz, reach):
     """
     Whether the path from s to l (relative to the body) stays beyond ``reach`` of its origin.
@@ -397,7 +397,7 @@ def _far(lx, ly, lz, sx, sy, sz, reach):
     return cx * cx + cy * cy + cz * cz >= reach * reach
 
 
-@numba.njit(**JIT)
+@numba.njit(**BORROW)
 def _origin_path(b, box):
     """
     Write the box of the body's origin over the step into ``box``; return how far it turns.
@@ -415,7 +415,7 @@ def _origin_path(b, box):
     return math.sqrt(turn)
 
 
-@numba.njit(**JIT)
+@numba.njit(**BORROW)
 def _clear(q, q_prev, r, c, b, box, reach, turn):
     """
     Whether point (r, c) stays beyond ``reach`` of the body's origin, tested in the world.

@@ -37,7 +37,7 @@ for good.
 
 import math
 
-from hcloth_ros.core.kernels.jit import JIT
+from hcloth_ros.core.kernels.jit import BORROW, JIT
 from hcloth_ros.core.kernels.layout import FREE
 import numba
 
@@ -47,7 +47,7 @@ RECOVERY_SPEED = 1.0     # m/s: how fast a point found inside an obstacle is mov
 RESTING = 3.0
 
 
-@numba.njit(**JIT)
+@numba.njit(**BORROW)
 def _resolve(q, qd, dv, q_prev, r, c, nx, ny, nz, depth, friction, h, on_position):
     """
     Move point (r, c) ``depth`` along the unit normal n; apply friction.
@@ -86,7 +86,7 @@ def _resolve(q, qd, dv, q_prev, r, c, nx, ny, nz, depth, friction, h, on_positio
         q[2, r, c] -= mz * hold
 
 
-@numba.njit(**JIT)
+@numba.njit(**BORROW)
 def _box_exit(q, q_prev, r, c, box, margin):
     """
     Return the axis and side (+-1) a point inside ``box`` leaves by (axis -1: outside).
@@ -114,7 +114,7 @@ def _box_exit(q, q_prev, r, c, box, margin):
     return axis, 1.0 if (q_prev[axis, r, c] - box[axis]) >= 0.0 else -1.0, False
 
 
-@numba.njit(**JIT)
+@numba.njit(**BORROW)
 def _movable(hold_kind, inherited_fixed, r, c):
     """
     Tell whether contact may move point (r, c).

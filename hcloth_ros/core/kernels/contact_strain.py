@@ -25,7 +25,7 @@ import math
 
 from hcloth_ros.core.kernels.bodies import _grown_reach, _inside, _off_core, _pressed, \
     _rotate, _to_local, BOX, FRICTION, KIND, R_END, SIZE, T_END
-from hcloth_ros.core.kernels.jit import JIT
+from hcloth_ros.core.kernels.jit import BORROW, JIT
 from hcloth_ros.core.kernels.layout import FREE, STENCIL_DC, STENCIL_DR
 import numba
 import numpy as np
@@ -52,7 +52,7 @@ STEP_ROWS = np.asarray(STENCIL_DR)[DIRECTIONS].astype(np.int64)
 STEP_COLS = np.asarray(STENCIL_DC)[DIRECTIONS].astype(np.int64)
 
 
-@numba.njit(**JIT)
+@numba.njit(**BORROW)
 def _box_face(x, y, z, hx, hy, hz, margin):
     """
     Outward normal of the face of a box at the origin (half extents h) a point lies on.
@@ -73,7 +73,7 @@ def _box_face(x, y, z, hx, hy, hz, margin):
     return True, 0.0, 1.0 if y > 0.0 else -1.0, 0.0
 
 
-@numba.njit(**JIT)
+@numba.njit(**BORROW)
 def _round_face(ox, oy, oz, radius, margin):
     """
     Outward normal of a sphere's surface (``radius``) a point lies on, offset o from its centre.
@@ -86,7 +86,7 @@ def _round_face(ox, oy, oz, radius, margin):
     return True, ox / dist, oy / dist, oz / dist
 
 
-@numba.njit(**JIT)
+@numba.njit(**BORROW)
 def _body_normal(b, x, y, z, margin):
     """
     Outward normal (world) of moving body row b's surface where a point lies, at the step's end.
@@ -106,7 +106,7 @@ def _body_normal(b, x, y, z, margin):
     return True, nx, ny, nz
 
 
-@numba.njit(**JIT)
+@numba.njit(**BORROW)
 def _without_into(mx, my, mz, found, nx, ny, nz):
     """Return the move (mx, my, mz) less its part into a surface of outward normal n (if found)."""
     into = mx * nx + my * ny + mz * nz
@@ -115,7 +115,7 @@ def _without_into(mx, my, mz, found, nx, ny, nz):
     return mx, my, mz
 
 
-@numba.njit(**JIT)
+@numba.njit(**BORROW)
 def _kept(q, r, c, mx, my, mz, planes, boxes, spheres, bodies, margin):
     """
     Return the move (mx, my, mz) of point (r, c) without its parts into the surfaces it lies on.
@@ -156,7 +156,7 @@ def _kept(q, r, c, mx, my, mz, planes, boxes, spheres, bodies, margin):
     return mx, my, mz
 
 
-@numba.njit(**JIT)
+@numba.njit(**BORROW)
 def _far_from(b, x, y, z, grow):
     """
     Whether a point is outside the sphere holding body row b grown by ``grow``.
@@ -171,7 +171,7 @@ def _far_from(b, x, y, z, grow):
     return dx * dx + dy * dy + dz * dz > far * far
 
 
-@numba.njit(**JIT)
+@numba.njit(**BORROW)
 def _held(q, r, c, bodies, planes, plane_friction, margin):
     """
     Whether a moving body presses point (r, c) into a plane and friction holds it there.
@@ -197,7 +197,7 @@ def _held(q, r, c, bodies, planes, plane_friction, margin):
     return False
 
 
-@numba.njit(**JIT)
+@numba.njit(**BORROW)
 def _held_once(q, r, c, held, bodies, planes, plane_friction, margin):
     """
     :func:`_held` of point (r, c), decided the first time a call asks (``held``: 0 not yet).
@@ -213,7 +213,7 @@ def _held_once(q, r, c, held, bodies, planes, plane_friction, margin):
     return held[r, c] == 1
 
 
-@numba.njit(**JIT)
+@numba.njit(**BORROW)
 def _shift(q, qd, dv, r, c, lam, mx, my, mz, h):
     """Move point (r, c) by ``lam`` times (mx, my, mz); its velocities follow."""
     for d, m in ((0, mx), (1, my), (2, mz)):
@@ -222,7 +222,7 @@ def _shift(q, qd, dv, r, c, lam, mx, my, mz, h):
         dv[d, r, c] += lam * m / h
 
 
-@numba.njit(**JIT)
+@numba.njit(**BORROW)
 def _touch(r, c, rows, cols, now, later):
     """
     Mark the runs of the springs with an end at point (r, c), which moved.
@@ -239,7 +239,7 @@ def _touch(r, c, rows, cols, now, later):
             later[sr, sc // RUN] = True
 
 
-@numba.njit(**JIT)
+@numba.njit(**BORROW)
 def _anchors(q, hold_kind, held, bodies, planes, plane_friction, margin, anchor):
     """
     Mark the points no sweep moves: held by a grip or a pin, or pressed by a body (_held).
@@ -268,7 +268,7 @@ def _anchors(q, hold_kind, held, bodies, planes, plane_friction, margin, anchor)
     return count
 
 
-@numba.njit(**JIT)
+@numba.njit(**BORROW)
 def _nearest_anchors(anchor, row_step, col_step, squared):
     """
     Give each point an anchor near it and their squared distance at rest (``squared``, m^2).
@@ -310,7 +310,7 @@ def _nearest_anchors(anchor, row_step, col_step, squared):
                 anchor[0, r, c], anchor[1, r, c] = ar, ac
 
 
-@numba.njit(**JIT)
+@numba.njit(**BORROW)
 def _tether(q, qd, dv, anchor, squared, planes, boxes, spheres, bodies, margin, stretch,
             tolerance, h):
     """

@@ -17,14 +17,14 @@ part only, a held point's ``a`` is its prescribed change less ``h g``, and ``h g
 added to every free point's ``dv``.
 """
 
-from hcloth_ros.core.kernels.jit import JIT
+from hcloth_ros.core.kernels.jit import BORROW, JIT
 from hcloth_ros.core.kernels.layout import advance_row, FREE
 from hcloth_ros.core.kernels.springs import force_row, stencil_sum_row
 import numba
 import numpy as np
 
 
-@numba.njit(**JIT)
+@numba.njit(**BORROW)
 def _first_sweep_component(force, mass, inv_diagonal, hold_kind, prescribed_dv, h, literal,
                            g, h_ftilde, dv_first):
     """One row and component of the first sweep, from the row's spring force."""

@@ -15,7 +15,7 @@ Level k inserts a point on every edge of level k-1. After level k-1 has stepped:
   change and added back to the result.
 """
 
-from hcloth_ros.core.kernels.jit import JIT, serial_and_parallel
+from hcloth_ros.core.kernels.jit import BORROW, JIT, serial_and_parallel
 from hcloth_ros.core.kernels.layout import advance_row, chunk_count, FREE
 from hcloth_ros.core.kernels.springs import (forward_terms_row, paired_force_row,
                                              stencil_sum_row)
@@ -24,7 +24,7 @@ from numba import prange
 import numpy as np
 
 
-@numba.njit(**JIT)
+@numba.njit(**BORROW)
 def _prolong_row(coarse, r, out):
     """Row r of a level-k array from level k-1 (see :func:`prolong`) into ``out[d, col]``."""
     cols, coarse_cols = out.shape[1], coarse.shape[2]
@@ -55,7 +55,7 @@ def prolong(coarse, fine):
         _prolong_row(coarse, r, fine[:, r])
 
 
-@numba.njit(**JIT)
+@numba.njit(**BORROW)
 def _add_drift_row(coarse_q_new, coarse_q_old, coarse_qd_new, h, hold_kind, q, r):
     """
     Move row r's free inserted points by the prolonged drift of level k-1 (in place).
@@ -83,7 +83,7 @@ def _add_drift_row(coarse_q_new, coarse_q_old, coarse_qd_new, h, hold_kind, q, r
 ESTIMATE_RING = 5
 
 
-@numba.njit(**JIT)
+@numba.njit(**BORROW)
 def _estimate_row(coarse_dv, hold_kind, prescribed_dv, r, ring):
     """
     Eq. 7's estimate of row r into its slot of ``ring`` (``(3, ESTIMATE_RING, cols)``).
@@ -101,7 +101,7 @@ def _estimate_row(coarse_dv, hold_kind, prescribed_dv, r, ring):
                 out[d, c] = prescribed_dv[d, r, c]
 
 
-@numba.njit(**JIT)
+@numba.njit(**BORROW)
 def _inherit_row(coarse_q, coarse_qd, coarse_dv, r, q_out, qd_out, dv_out):
     """Constraint C on an even row: its even columns take level k-1's new state."""
     for d in range(3):

@@ -15,7 +15,7 @@ Dirichlet rows (identity). CG with the Jacobi preconditioner solves it matrix-fr
 
 import math
 
-from hcloth_ros.core.kernels.jit import JIT, serial_and_parallel
+from hcloth_ros.core.kernels.jit import BORROW, JIT, serial_and_parallel
 from hcloth_ros.core.kernels.layout import (chunk_count, interleaved_dot, row3,
                                             STENCIL_DC, STENCIL_DR,
                                             stencil_span)
@@ -46,7 +46,7 @@ def stiffness_block(dx, dy, dz, length, rest, stiffness, contraction):
     return k, max(0.0, 1.0 - rest / length), dx / length, dy / length, dz / length
 
 
-@numba.njit(**JIT)
+@numba.njit(**BORROW)
 def _system_row(q, rest, stiffness, contraction, mass, free, h, p, r, diagonal, out):
     """
     Write row r of ``(M - h^2 J) p`` into ``out`` (identity on held points).

@@ -79,6 +79,20 @@ PJIT = {**JIT, 'parallel': True}
 # of the kernel timed on captured calls, issue 10's note). Each costs compilation wherever
 # it is called: kept to the few that pay.
 INLINE = {**JIT, 'inline': 'always'}
+# Kernels that only borrow arrays (they allocate none and return none): compiled without
+# numba's reference counting (NRT), which would otherwise increment and decrement the
+# count of every array a call takes (atomic operations, each a call) on each path LLVM
+# cannot prove balanced, and a callee's error status makes most paths so. On the sliding
+# folded drop's replayed self-contact calls, those increments and decrements were 29 % of
+# the kernel's samples (``perf record``), and the calls took 300-330 ms instead of
+# 395-530 (issue 10's note, session 39). Numba itself refuses to compile such a kernel
+# if it allocates or calls one that does (no reference counting, no owner), so the flag
+# cannot leak memory. ``_nrt`` is a target option of numba's CPU target
+# (``numba.core.cpu``), named with an underscore and used by numba's own tests; a numba
+# without it compiles these kernels with reference counting (slower, the same results).
+_BORROWS = hasattr(numba.core.cpu.CPUTargetOptions, '_nrt')
+BORROW = {**JIT, '_nrt': False} if _BORROWS else JIT
+BORROW_INLINE = {**INLINE, '_nrt': False} if _BORROWS else INLINE
 
 
 def serial_and_parallel(func, parfor=True, **parallel_globals):

@@ -84,7 +84,7 @@ side the point's own surface lies on, and is pushed apart as the detection's pai
 
 import math
 
-from hcloth_ros.core.kernels.jit import INLINE, JIT
+from hcloth_ros.core.kernels.jit import BORROW, BORROW_INLINE, JIT
 from hcloth_ros.core.kernels.layout import FREE
 import numba
 import numpy as np
@@ -162,7 +162,7 @@ CELL_EDGES = np.array([(0, 0, 0, 1, 0), (0, 1, 0, 0, 1), (0, 1, 0, 1, 2), (1, 1,
                        (0, 1, 1, 1, 1)], dtype=np.int64)
 
 
-@numba.njit(**JIT)
+@numba.njit(**BORROW)
 def _triangle(t, cols):
     """Flat indices of triangle t's three vertices on a grid of ``cols`` columns."""
     k = t // 2
@@ -173,7 +173,7 @@ def _triangle(t, cols):
     return a, a + cols + 1, a + cols
 
 
-@numba.njit(**JIT)
+@numba.njit(**BORROW)
 def _point(x, i):
     """
     Point i of ``x`` (3, n) as a tuple.
@@ -185,7 +185,7 @@ def _point(x, i):
     return x[0, i], x[1, i], x[2, i]
 
 
-@numba.njit(**JIT)
+@numba.njit(**BORROW)
 def _at(x0, x1, i, tau, shift):
     """Point i at time ``tau`` of the step in the frame of the mean displacement."""
     return (x0[0, i] + tau * (x1[0, i] - x0[0, i] - shift[0]),
@@ -193,7 +193,7 @@ def _at(x0, x1, i, tau, shift):
             x0[2, i] + tau * (x1[2, i] - x0[2, i] - shift[2]))
 
 
-@numba.njit(**JIT)
+@numba.njit(**BORROW)
 def _plane_distance(p, a, b, c):
     """Return p's signed distance to the plane of (a, b, c) and its unit normal (as _plane)."""
     ex, ey, ez = b[0] - a[0], b[1] - a[1], b[2] - a[2]
@@ -207,7 +207,7 @@ def _plane_distance(p, a, b, c):
     return dx * nx + dy * ny + dz * nz, nx, ny, nz
 
 
-@numba.njit(**JIT)
+@numba.njit(**BORROW)
 def _plane(p, a, b, c):
     """
     Return p's signed distance to the plane of (a, b, c), its unit normal and weights.
@@ -233,14 +233,14 @@ def _plane(p, a, b, c):
     return sd, nx, ny, nz, 1.0 - wb - wc, wb, wc
 
 
-@numba.njit(**JIT)
+@numba.njit(**BORROW)
 def _along(ab, ac, p, v):
     """Return the dot products of ``p - v`` with the edges ``ab`` and ``ac``."""
     dx, dy, dz = p[0] - v[0], p[1] - v[1], p[2] - v[2]
     return ab[0] * dx + ab[1] * dy + ab[2] * dz, ac[0] * dx + ac[1] * dy + ac[2] * dz
 
 
-@numba.njit(**JIT)
+@numba.njit(**BORROW)
 def _closest(p, a, b, c):
     """
     Barycentric weights of the point of triangle (a, b, c) closest to p.
@@ -279,7 +279,7 @@ def _closest(p, a, b, c):
     return va / total, vb / total, vc / total
 
 
-@numba.njit(**JIT)
+@numba.njit(**BORROW)
 def _offset(x, p, i, j, k, u, v, w):
     """Vector from the point ``u x_i + v x_j + w x_k`` to point p, and its length."""
     ox = x[0, p] - u * x[0, i] - v * x[0, j] - w * x[0, k]
@@ -288,7 +288,7 @@ def _offset(x, p, i, j, k, u, v, w):
     return ox, oy, oz, math.sqrt(ox * ox + oy * oy + oz * oz)
 
 
-@numba.njit(**JIT)
+@numba.njit(**BORROW)
 def _plane_at(x0, x1, p, i, j, k, tau, shift):
     """Return p's signed distance to triangle (i, j, k)'s plane at ``tau``, and its normal."""
     sd, nx, ny, nz = _plane_distance(
@@ -297,7 +297,7 @@ def _plane_at(x0, x1, p, i, j, k, tau, shift):
     return sd, (nx, ny, nz)
 
 
-@numba.njit(**JIT)
+@numba.njit(**BORROW)
 def _crossing(x0, x1, p, i, j, k, ta, tb, sda, na, sdb, nb, shift, thickness, rows, cols,
               cubic):
     """
@@ -359,7 +359,7 @@ def _crossing(x0, x1, p, i, j, k, ta, tb, sda, na, sdb, nb, shift, thickness, ro
     return 2.0 if sda > 0.0 else -2.0
 
 
-@numba.njit(**JIT)
+@numba.njit(**BORROW)
 def _apart(x0, x1, p, i, j, k, ta, tb, shift, reach):
     """Whether p's path and triangle (i, j, k)'s boxes between ``ta`` and ``tb`` stay apart."""
     pa, pb = _at(x0, x1, p, ta, shift), _at(x0, x1, p, tb, shift)
@@ -376,7 +376,7 @@ def _apart(x0, x1, p, i, j, k, ta, tb, shift, reach):
     return False
 
 
-@numba.njit(**JIT)
+@numba.njit(**BORROW)
 def _root(cubic, ta, tb, guess):
     """
     Return the time in [ta, tb] where ``cubic`` (power coefficients) is zero.
@@ -416,7 +416,7 @@ def _root(cubic, ta, tb, guess):
     return t
 
 
-@numba.njit(**JIT)
+@numba.njit(**BORROW)
 def _near(x1, p, i, j, k, thickness):
     """
     Side (+-1) if p ends nearer than ``thickness`` to triangle (i, j, k), else 0.
@@ -437,7 +437,7 @@ def _near(x1, p, i, j, k, thickness):
     return 1.0 if sd >= 0.0 else -1.0
 
 
-@numba.njit(**JIT)
+@numba.njit(**BORROW)
 def _patch_boxes(x0, x1, rows, cols, size, thickness, boxes, ends, cones, stale):
     """
     Swept box (grown by ``thickness``), boxes at both ends and normal cone of the patches.
@@ -485,7 +485,7 @@ def _patch_boxes(x0, x1, rows, cols, size, thickness, boxes, ends, cones, stale)
             cone[3] = low
 
 
-@numba.njit(**JIT)
+@numba.njit(**BORROW)
 def _quad_normal(x, a, b, c, d):
     """
     Return the unit normal of the quadrilateral a, b (top), c, d (bottom).
@@ -496,7 +496,7 @@ def _quad_normal(x, a, b, c, d):
     return _unit(nx, ny, nz)
 
 
-@numba.njit(**INLINE)
+@numba.njit(**BORROW_INLINE)
 def _quad_cross(x, a, b, c, d):
     """Return the cross product of quadrilateral a, b, c, d's diagonals a-d and b-c."""
     ex, ey, ez = x[0, d] - x[0, a], x[1, d] - x[1, a], x[2, d] - x[2, a]
@@ -504,7 +504,7 @@ def _quad_cross(x, a, b, c, d):
     return ey * fz - ez * fy, ez * fx - ex * fz, ex * fy - ey * fx
 
 
-@numba.njit(**INLINE)
+@numba.njit(**BORROW_INLINE)
 def _unit(nx, ny, nz):
     """Return ``n`` scaled to unit length (0 if it has none)."""
     norm = math.sqrt(nx * nx + ny * ny + nz * nz)
@@ -513,7 +513,7 @@ def _unit(nx, ny, nz):
     return nx / norm, ny / norm, nz / norm
 
 
-@numba.njit(**INLINE)
+@numba.njit(**BORROW_INLINE)
 def _below(nx, ny, nz, ax, ay, az, low):
     """
     Whether the cosine between a cell's normal ``n`` and the unit ``a*`` may be under ``low``.
@@ -538,13 +538,13 @@ def _below(nx, ny, nz, ax, ay, az, low):
     return dot < 0.0 and dot * dot > square
 
 
-@numba.njit(**JIT)
+@numba.njit(**BORROW)
 def _overlap(a, b):
     return (a[0] <= b[3] and b[0] <= a[3] and a[1] <= b[4] and b[1] <= a[4]
             and a[2] <= b[5] and b[2] <= a[5])
 
 
-@numba.njit(**JIT)
+@numba.njit(**BORROW)
 def _pair_needed(boxes, cones, angles, ai, aj, bi, bj):
     """
     Return whether patches A and B may touch.
@@ -575,7 +575,7 @@ def _pair_needed(boxes, cones, angles, ai, aj, bi, bj):
     return angles[min(ai, bi), min(aj, bj), 3] == 0.0
 
 
-@numba.njit(**JIT)
+@numba.njit(**BORROW)
 def _merged(t, a, b):
     """
     Return the narrowest cone holding two cones, of half-angles a and b, axes t apart.
@@ -592,7 +592,7 @@ def _merged(t, a, b):
     return m, m - a
 
 
-@numba.njit(**JIT)
+@numba.njit(**BORROW)
 def _block_flat(angles, i, j):
     """
     Whether patches (i, j), (i, j + 1), (i + 1, j + 1), (i + 1, j) fit in one flat cone.
@@ -618,7 +618,7 @@ def _block_flat(angles, i, j):
     return False
 
 
-@numba.njit(**JIT)
+@numba.njit(**BORROW)
 def _between(angles, ai, aj, bi, bj):
     """Return the angle between the cone axes of patches A and B, next to each other."""
     if ai == bi:
@@ -652,7 +652,7 @@ def _cone_angles(cones):
     return out
 
 
-@numba.njit(**INLINE)
+@numba.njit(**BORROW_INLINE)
 def _block_boxes(x0, x1, r0, r1, c0, c1, cols, table, ti, tj, motion):
     """
     Write the boxes of a block of grid points at both ends of the step and its motion.
@@ -679,7 +679,7 @@ def _block_boxes(x0, x1, r0, r1, c0, c1, cols, table, ti, tj, motion):
             table[ti, tj, 12 + d] = move / ((r1 - r0 + 1) * (c1 - c0 + 1))
 
 
-@numba.njit(**JIT)
+@numba.njit(**BORROW)
 def _moving_box(ends, shift, reach, out):
     """
     Write the box a block sweeps in a frame moving by ``shift``, grown by ``reach``.
@@ -694,7 +694,7 @@ def _moving_box(ends, shift, reach, out):
         out[3 + d] = max(ends[3 + d], ends[9 + d] - shift[d]) + reach
 
 
-@numba.njit(**JIT)
+@numba.njit(**BORROW)
 def _patch_block_boxes(subs, bi, bj, shift, out):
     """Write the boxes of patch (bi, bj)'s blocks in the frame moving by ``shift``, row-major."""
     per = PATCH // SUB
@@ -705,7 +705,7 @@ def _patch_block_boxes(subs, bi, bj, shift, out):
             m += 1
 
 
-@numba.njit(**JIT)
+@numba.njit(**BORROW)
 def _sub_boxes(x0, x1, rows, cols, bi, bj, subs):
     """
     Boxes of patch (bi, bj)'s blocks of ``SUB`` x ``SUB`` cells at both ends of the step.
@@ -723,7 +723,7 @@ def _sub_boxes(x0, x1, rows, cols, bi, bj, subs):
                          min((sj + 1) * SUB, cols - 1), cols, subs, si, sj, False)
 
 
-@numba.njit(**JIT)
+@numba.njit(**BORROW)
 def _path_box(x0, x1, p, shift, reach, out):
     """Write the box p's path sweeps in a frame moving by ``shift``, grown by ``reach``."""
     for d in range(3):
@@ -731,7 +731,7 @@ def _path_box(x0, x1, p, shift, reach, out):
         out[3 + d] = max(x0[d, p], x1[d, p] - shift[d]) + reach
 
 
-@numba.njit(**JIT)
+@numba.njit(**BORROW)
 def _pair_side(x0, x1, p, i, j, k, thickness, substeps, shift, rows, cols):
     """
     Whether p and triangle (i, j, k) make a pair: its side if it crossed (+-2) or ends near (+-1).
@@ -764,19 +764,19 @@ def _pair_side(x0, x1, p, i, j, k, thickness, substeps, shift, rows, cols):
     return _near(x1, p, i, j, k, thickness)
 
 
-@numba.njit(**JIT)
+@numba.njit(**BORROW)
 def _norm1(x, y, z):
     """Return ``|x| + |y| + |z|``."""
     return abs(x) + abs(y) + abs(z)
 
 
-@numba.njit(**JIT)
+@numba.njit(**BORROW)
 def _triple(ux, uy, uz, vx, vy, vz, wx, wy, wz):
     """Return ``(u x v) . w``."""
     return (uy * vz - uz * vy) * wx + (uz * vx - ux * vz) * wy + (ux * vy - uy * vx) * wz
 
 
-@numba.njit(**JIT)
+@numba.njit(**BORROW)
 def _may_cross(x0, x1, p, i, j, k):
     """
     Whether p's side of triangle (i, j, k)'s plane may change during the step.
@@ -786,7 +786,7 @@ def _may_cross(x0, x1, p, i, j, k):
     return _may_change(*_side_cubic(x0, x1, p, i, j, k))
 
 
-@numba.njit(**JIT)
+@numba.njit(**BORROW)
 def _may_change(c0, c1, c2, c3, margin):
     """
     Whether the cubic ``c0 + c1 t + c2 t^2 + c3 t^3`` may change sign on [0, 1].
@@ -804,7 +804,7 @@ def _may_change(c0, c1, c2, c3, margin):
     return not (low > margin or high < -margin)
 
 
-@numba.njit(**JIT)
+@numba.njit(**BORROW)
 def _side_cubic(x0, x1, p, i, j, k):
     """
     Return p's side of triangle (i, j, k)'s plane as a cubic in time, and its rounding.
@@ -841,7 +841,7 @@ def _side_cubic(x0, x1, p, i, j, k):
     return c0, c1, c2, c3, margin
 
 
-@numba.njit(**JIT)
+@numba.njit(**BORROW)
 def _near_blocks(subs, ends, shift, thickness, ai, aj, bi, bj, fresh_blocks, b_boxes, near,
                  counts, work, kept):
     """
@@ -901,7 +901,7 @@ def _near_blocks(subs, ends, shift, thickness, ai, aj, bi, bj, fresh_blocks, b_b
     return listed
 
 
-@numba.njit(**JIT)
+@numba.njit(**BORROW)
 def _points_against(x0, x1, rows, cols, thickness, substeps, subs, shift, ai, aj, bi, bj,
                     fresh, fresh_blocks, pairs, sides, count, b_boxes, near, counts,
                     tri_boxes, tri_ready, work):
@@ -977,14 +977,14 @@ def _points_against(x0, x1, rows, cols, thickness, substeps, subs, shift, ai, aj
     return count
 
 
-@numba.njit(**JIT)
+@numba.njit(**BORROW)
 def _edge(e, cols):
     """Flat indices of edge e's ends: ``e = 3 v + d``, d 0 along a row, 1 down, 2 diagonal."""
     v, d = e // 3, e % 3
     return v, v + (1, cols, cols + 1)[d]
 
 
-@numba.njit(**JIT)
+@numba.njit(**BORROW)
 def _on_border(a, b, rows, cols):
     """Whether the edge between grid points a and b lies on the grid's border."""
     ra, ca, rb, cb = a // cols, a % cols, b // cols, b % cols
@@ -992,7 +992,7 @@ def _on_border(a, b, rows, cols):
         (ca == cb and (ca == 0 or ca == cols - 1))
 
 
-@numba.njit(**JIT)
+@numba.njit(**BORROW)
 def _segments(a, b, c, d):
     """
     Closest points of the lines through segments a-b and c-d: ``(s, t, ok)``.
@@ -1012,7 +1012,7 @@ def _segments(a, b, c, d):
     return (uv * vw - vv * uw) / denom, (uu * vw - uv * uw) / denom, True
 
 
-@numba.njit(**JIT)
+@numba.njit(**BORROW)
 def _gap(a, b, c, d, s, t):
     """Vector from ``c + t (d - c)`` to ``a + s (b - a)``, and its length."""
     gx = a[0] + s * (b[0] - a[0]) - c[0] - t * (d[0] - c[0])
@@ -1021,14 +1021,14 @@ def _gap(a, b, c, d, s, t):
     return gx, gy, gz, math.sqrt(gx * gx + gy * gy + gz * gz)
 
 
-@numba.njit(**JIT)
+@numba.njit(**BORROW)
 def _orient(a, b, c, d):
     """``((b - a) x (c - a)) . (d - a)``: its sign is edge a-b's side of edge c-d."""
     return _triple(b[0] - a[0], b[1] - a[1], b[2] - a[2], c[0] - a[0], c[1] - a[1],
                    c[2] - a[2], d[0] - a[0], d[1] - a[1], d[2] - a[2])
 
 
-@numba.njit(**JIT)
+@numba.njit(**BORROW)
 def _edges_meet(a, b, c, d, thickness):
     """Whether segments a-b and c-d pass within ``thickness`` at interior points of both."""
     s, t, ok = _segments(a, b, c, d)
@@ -1037,7 +1037,7 @@ def _edges_meet(a, b, c, d, thickness):
     return _gap(a, b, c, d, s, t)[3] < thickness
 
 
-@numba.njit(**JIT)
+@numba.njit(**BORROW)
 def _edge_side(x0, x1, a, b, c, d, thickness, substeps, shift, near=True):
     """
     Whether edges a-b and c-d make a pair: a-b's side if it crossed c-d (+-2) or ends near (+-1).
@@ -1079,7 +1079,7 @@ def _edge_side(x0, x1, a, b, c, d, thickness, substeps, shift, near=True):
     return 1.0 if _orient(pa, pb, pc, pd) >= 0.0 else -1.0
 
 
-@numba.njit(**JIT)
+@numba.njit(**BORROW)
 def _segment_box(x0, x1, a, b, shift, reach, out):
     """Write the box edge a-b sweeps in a frame moving by ``shift``, grown by ``reach``."""
     for d in range(3):
@@ -1088,7 +1088,7 @@ def _segment_box(x0, x1, a, b, shift, reach, out):
             + reach
 
 
-@numba.njit(**JIT)
+@numba.njit(**BORROW)
 def _edge_against(x0, x1, rows, cols, thickness, substeps, subs, shift, e, bi, bj, fresh,
                   fresh_blocks, pairs, sides, count, boxes, b_boxes, crease, near, near_count,
                   seg_boxes, seg_ready):
@@ -1173,7 +1173,7 @@ def _edge_against(x0, x1, rows, cols, thickness, substeps, subs, shift, e, bi, b
     return count
 
 
-@numba.njit(**JIT)
+@numba.njit(**BORROW)
 def _block_of(r, c, ai, aj, rows, cols):
     """
     Return the index in patch (ai, aj) of the block holding grid point (r, c), a point of it.
@@ -1186,7 +1186,7 @@ def _block_of(r, c, ai, aj, rows, cols):
     return (min(r // SUB, last_i) - ai * per) * per + min(c // SUB, last_j) - aj * per
 
 
-@numba.njit(**JIT)
+@numba.njit(**BORROW)
 def _free_edges_against(x0, x1, rows, cols, thickness, substeps, subs, shift, ai, aj, bi,
                         bj, fresh, fresh_blocks, dirty, pairs, sides, count, crease, b_boxes,
                         near, counts, boxes, seg_boxes, seg_ready):
@@ -1227,7 +1227,7 @@ def _free_edges_against(x0, x1, rows, cols, thickness, substeps, subs, shift, ai
     return count
 
 
-@numba.njit(**JIT)
+@numba.njit(**BORROW)
 def _crease_edges_against(x0, x1, rows, cols, thickness, substeps, subs, shift, ai, aj, bi,
                           bj, fresh, fresh_blocks, dirty, pairs, sides, count, crease,
                           b_boxes, near, counts, boxes, seg_boxes, seg_ready):
@@ -1261,14 +1261,14 @@ def _crease_edges_against(x0, x1, rows, cols, thickness, substeps, subs, shift, 
     return count
 
 
-@numba.njit(**JIT)
+@numba.njit(**BORROW)
 def _triangle_normal(x, t, cols):
     """Return triangle t's normal, twice its area long (the vertices' order of _triangle)."""
     i, j, k = _triangle(t, cols)
     return _normal_of(x, i, j, k)
 
 
-@numba.njit(**JIT)
+@numba.njit(**BORROW)
 def _normal_of(x, i, j, k):
     """Return the normal of triangle (i, j, k), twice its area long."""
     ex, ey, ez = x[0, j] - x[0, i], x[1, j] - x[1, i], x[2, j] - x[2, i]
@@ -1276,7 +1276,7 @@ def _normal_of(x, i, j, k):
     return ey * fz - ez * fy, ez * fx - ex * fz, ex * fy - ey * fx
 
 
-@numba.njit(**JIT)
+@numba.njit(**BORROW)
 def _patch_creases(x, rows, cols, bi, bj, cosine, bit, crease, normals):
     """
     Set ``bit`` in ``crease`` at patch (bi, bj)'s creases in positions ``x``.
@@ -1333,7 +1333,7 @@ def _patch_creases(x, rows, cols, bi, bj, cosine, bit, crease, normals):
                 crease[3 * v + d] = (crease[3 * v + d] & keep) | flag
 
 
-@numba.njit(**JIT)
+@numba.njit(**BORROW)
 def _triangle_boxes(x0, x1, rows, cols, si, sj, shift, out):
     """
     Write the boxes block (si, sj)'s triangles sweep in the frame moving by ``shift``.
@@ -1478,7 +1478,7 @@ def _detect(x0, x1, rows, cols, thickness, substeps, dirty, fresh, fresh_blocks,
     return count, edge_count
 
 
-@numba.njit(**JIT)
+@numba.njit(**BORROW)
 def _creases_ready(x0, x1, rows, cols, bi, bj, cosine, crease, crease_ready, normals):
     """
     Flag patch (bi, bj)'s creases at the start and at the end, where not yet done.
@@ -1491,7 +1491,7 @@ def _creases_ready(x0, x1, rows, cols, bi, bj, cosine, crease, crease_ready, nor
             crease_ready[bi, bj, time] = True
 
 
-@numba.njit(**JIT)
+@numba.njit(**BORROW)
 def _flags_stale(crease_ready, time, stale):
     """
     Mark the crease flags at ``time`` (0 start, 1 end) out of date where ``stale`` round them.
@@ -1508,7 +1508,7 @@ def _flags_stale(crease_ready, time, stale):
                 crease_ready[bi, bj, time] = False
 
 
-@numba.njit(**JIT)
+@numba.njit(**BORROW)
 def _crease_cosine(thickness, edge, angle):
     """
     Return the cosine of the bend (angle between two normals) past which an edge is a crease.
@@ -1540,7 +1540,7 @@ def _crease_cosine(thickness, edge, angle):
     return math.cos(2.0 * math.asin(sine))
 
 
-@numba.njit(**JIT)
+@numba.njit(**BORROW)
 def _has_creases(crease, rows, cols, bi, bj):
     """Whether patch (bi, bj) has a crease (at either end of the step, :func:`_patch_creases`)."""
     for r in range(bi * PATCH, min((bi + 1) * PATCH, rows - 1)):
@@ -1579,7 +1579,7 @@ def _fresh_blocks(fresh, rows, cols):
     return out
 
 
-@numba.njit(**JIT)
+@numba.njit(**BORROW)
 def _longest_move(x0, x1, ta, tb, shift):
     """
     Return the longest path of a point between ``ta`` and ``tb`` in the shifted frame.
@@ -1596,14 +1596,14 @@ def _longest_move(x0, x1, ta, tb, shift):
     return abs(tb - ta) * math.sqrt(longest)
 
 
-@numba.njit(**JIT)
+@numba.njit(**BORROW)
 def _squared(x, i, j):
     """Squared distance between points i and j of ``x`` (3, n)."""
     ex, ey, ez = x[0, j] - x[0, i], x[1, j] - x[1, i], x[2, j] - x[2, i]
     return ex * ex + ey * ey + ez * ez
 
 
-@numba.njit(**JIT)
+@numba.njit(**BORROW)
 def _longest_edge_from(x, i0, j0, count, longest):
     """
     Return the larger of ``longest`` and the squared lengths of ``count`` edges i0 + m, j0 + m.
@@ -1622,7 +1622,7 @@ def _longest_edge_from(x, i0, j0, count, longest):
     return max(max(a, b), max(c, d))
 
 
-@numba.njit(**JIT)
+@numba.njit(**BORROW)
 def _longest_edge(x, rows, cols):
     """
     Return the longest structural or diagonal edge of the triangles (m).
@@ -1639,14 +1639,14 @@ def _longest_edge(x, rows, cols):
     return math.sqrt(longest)
 
 
-@numba.njit(**JIT)
+@numba.njit(**BORROW)
 def _shift(x, i, weight, nx, ny, nz):
     x[0, i] += weight * nx
     x[1, i] += weight * ny
     x[2, i] += weight * nz
 
 
-@numba.njit(**JIT)
+@numba.njit(**BORROW)
 def _move(x, qd, dv, i, weight, nx, ny, nz, h):
     x[0, i] += weight * nx
     x[1, i] += weight * ny
@@ -1659,7 +1659,7 @@ def _move(x, qd, dv, i, weight, nx, ny, nz, h):
     dv[2, i] += weight * nz / h
 
 
-@numba.njit(**INLINE)
+@numba.njit(**BORROW_INLINE)
 def _separation(x, p, i, j, k, side, thickness):
     """
     Return how to push p away from triangle (i, j, k): ``(n xyz, gap, u, v, w)``.
@@ -1689,14 +1689,14 @@ def _separation(x, p, i, j, k, side, thickness):
     return ox / dist, oy / dist, oz / dist, dist - thickness, u, v, w
 
 
-@numba.njit(**JIT)
+@numba.njit(**BORROW)
 def _blocked(support, v, nx, ny, nz):
     """Whether vertex v has no room left to move along n (into its obstacle)."""
     return support[3, v] <= ROOM_TOLERANCE and \
         support[0, v] * nx + support[1, v] * ny + support[2, v] * nz < 0.0
 
 
-@numba.njit(**JIT)
+@numba.njit(**BORROW)
 def _room(support, v, a, nx, ny, nz):
     """
     Return the part of a move ``a`` along n that vertex v may make, and use its room.
@@ -1711,7 +1711,7 @@ def _room(support, v, a, nx, ny, nz):
     return a
 
 
-@numba.njit(**JIT)
+@numba.njit(**BORROW)
 def _motion(x0, x1, verts, weights):
     """Return the motion over the step of the four vertices' weighted sum."""
     rx = ry = rz = 0.0
@@ -1723,7 +1723,7 @@ def _motion(x0, x1, verts, weights):
     return rx, ry, rz
 
 
-@numba.njit(**JIT)
+@numba.njit(**BORROW)
 def _free_mass(inv_mass, support, v, n, ahead, held=False):
     """
     Vertex v's inverse mass for a push along n (against it if not ``ahead``), 0 if blocked.
@@ -1739,7 +1739,7 @@ def _free_mass(inv_mass, support, v, n, ahead, held=False):
     return inv_mass[v]
 
 
-@numba.njit(**INLINE)
+@numba.njit(**BORROW_INLINE)
 def _push(x1, qd, dv, inv_mass, support, verts, weights, ahead, nx, ny, nz, gap, one_side):
     """
     Move a pair's four vertices so that their weighted sum gains ``-gap`` along n.
@@ -1795,7 +1795,7 @@ def _push(x1, qd, dv, inv_mass, support, verts, weights, ahead, nx, ny, nz, gap,
     return lam, denom, ims[0], ims[1], ims[2], ims[3]
 
 
-@numba.njit(**INLINE)
+@numba.njit(**BORROW_INLINE)
 def _share(weights, ims):
     """
     Return a push's denominator: the weighted inverse masses, at least the largest one.
@@ -1812,7 +1812,7 @@ def _share(weights, ims):
     return max(total, most)
 
 
-@numba.njit(**INLINE)
+@numba.njit(**BORROW_INLINE)
 def _come_to_rest(inv_mass, support, verts, weights, ims, ahead, nx, ny, nz):
     """
     After a push: a side pushed up off a side that rests comes to rest on it.
@@ -1843,7 +1843,7 @@ def _come_to_rest(inv_mass, support, verts, weights, ims, ahead, nx, ny, nz):
             support[3, v] = 0.0
 
 
-@numba.njit(**INLINE)
+@numba.njit(**BORROW_INLINE)
 def _inelastic(qd, verts, weights, ims, clipped, ahead, nx, ny, nz, dv):
     """
     Take a pushed pair's approach along n off its vertices' velocities.
@@ -1902,7 +1902,7 @@ def _inelastic(qd, verts, weights, ims, clipped, ahead, nx, ny, nz, dv):
                 dv[d, verts[m]] -= excess * n_d
 
 
-@numba.njit(**INLINE)
+@numba.njit(**BORROW_INLINE)
 def _resolve(x0, x1, qd, dv, inv_mass, support, cols, p, t, side, thickness, friction, h,
              one_side):
     """
@@ -1930,7 +1930,7 @@ def _resolve(x0, x1, qd, dv, inv_mass, support, cols, p, t, side, thickness, fri
     return True
 
 
-@numba.njit(**INLINE)
+@numba.njit(**BORROW_INLINE)
 def _rub(x1, qd, dv, support, verts, uvw, ims, lam, denom, motion, n, most, h):
     """
     Friction after a point-triangle push: up to ``most`` (m) off the pair's sliding.
@@ -1960,7 +1960,7 @@ def _rub(x1, qd, dv, support, verts, uvw, ims, lam, denom, motion, n, most, h):
             _move(x1, qd, dv, idx, _room(support, idx, wt, rx, ry, rz), rx, ry, rz, h)
 
 
-@numba.njit(**JIT)
+@numba.njit(**BORROW)
 def _clamped_segments(a, b, c, d):
     """Closest points ``(s, t)`` of segments a-b and c-d (the lines' clamped into both)."""
     s, t, ok = _segments(a, b, c, d)
@@ -1983,7 +1983,7 @@ def _clamped_segments(a, b, c, d):
     return s, t
 
 
-@numba.njit(**JIT)
+@numba.njit(**BORROW)
 def _resolve_edges(x0, x1, qd, dv, inv_mass, support, cols, e, f, side, thickness, one_side):
     """
     Push edge e (a free edge) and edge f apart; returns whether they were too close.
@@ -2240,7 +2240,7 @@ def _resolve_passes(x0, x1, qd, dv, inv_mass, support, cols, pairs, sides, kept,
                     stamps[v] = pushes
 
 
-@numba.njit(**JIT)
+@numba.njit(**BORROW)
 def _faces(x, t, side, up, cols):
     """Whether triangle t's normal on ``side`` points within 45 degrees of ``up``."""
     nx, ny, nz = _triangle_normal(x, t, cols)
@@ -2259,7 +2259,7 @@ def _inverse_masses(mass, hold_kind):
     return inv_mass
 
 
-@numba.njit(**JIT)
+@numba.njit(**BORROW)
 def _next_to(t, vertex, rows, cols):
     """
     Return the triangle across triangle t's edge opposite its vertex ``vertex`` (0-2), or -1.
@@ -2284,7 +2284,7 @@ def _next_to(t, vertex, rows, cols):
     return 2 * (cell - 1) if c >= 1 else -1
 
 
-@numba.njit(**JIT)
+@numba.njit(**BORROW)
 def _track(x, p, t, rows, cols):
     """
     Return the triangle p's projection lies in, walking from t across the grid, or -1.
@@ -2398,7 +2398,7 @@ def carry(q, qd, dv, q_prev, mass, hold_kind, support, carried, up, thickness, f
     return count
 
 
-@numba.njit(**INLINE)
+@numba.njit(**BORROW_INLINE)
 def _bear(x0, x1, qd, dv, inv_mass, support, p, t, side, up, thickness, friction, rows,
           cols, h):
     """
@@ -2450,7 +2450,7 @@ def _bear(x0, x1, qd, dv, inv_mass, support, p, t, side, up, thickness, friction
     return pushed
 
 
-@numba.njit(**JIT)
+@numba.njit(**BORROW)
 def _surface_side(x, p, t, rows, cols):
     """
     Return the side (+-1) of triangle t's plane that p's own surface lies on, or 0.
@@ -2590,7 +2590,7 @@ def obstacle_supports(planes, boxes, margin, q, out):
             out[0, r, c], out[1, r, c], out[2, r, c], out[3, r, c] = nx, ny, nz, best
 
 
-@numba.njit(**JIT)
+@numba.njit(**BORROW)
 def _still_sweeps(boxes, ends, subs, subs_ready, stale, reach):
     """
     Cut the kept boxes of the patches not ``stale`` down to where their points are, unmoving.
@@ -2624,7 +2624,7 @@ def _still_sweeps(boxes, ends, subs, subs_ready, stale, reach):
                         subs[si, sj, d] = subs[si, sj, 6 + d]
 
 
-@numba.njit(**JIT)
+@numba.njit(**BORROW)
 def _dirty_patches(fresh_blocks, dirty):
     """Mark in ``dirty`` the patches holding a block of ``fresh_blocks`` (only those)."""
     per = PATCH // SUB

@@ -7,7 +7,7 @@ downwards, or diagonally down).
 
 import math
 
-from hcloth_ros.core.kernels.jit import JIT, serial_and_parallel
+from hcloth_ros.core.kernels.jit import BORROW, JIT, serial_and_parallel
 from hcloth_ros.core.kernels.layout import (chunk_count, interleaved_dot, row3,
                                             STENCIL_DC, STENCIL_DR,
                                             stencil_span)
@@ -17,7 +17,7 @@ from numba import prange
 import numpy as np
 
 
-@numba.njit(**JIT)
+@numba.njit(**BORROW)
 def _strain_row(q, rest, r, s, magnitude, positive):
     """
     Compute the strains ``|d| / L - 1`` of the springs leaving row r in direction s.
@@ -102,7 +102,7 @@ def strain_stats(q, qd, rest):
 strain_stats, strain_stats_parallel = serial_and_parallel(strain_stats)
 
 
-@numba.njit(**JIT)
+@numba.njit(**BORROW)
 def _energy_row(q, qd, mass, rest, stiffness, contraction, gravity, r):
     """Kinetic, gravitational and elastic energy of row r's points and springs (J)."""
     rows, cols = mass.shape

@@ -45,7 +45,7 @@ dense when its list exceeds 1 / ``SPARSE_SHARE`` of the level's springs.
 
 import math
 
-from hcloth_ros.core.kernels.jit import JIT, serial_and_parallel
+from hcloth_ros.core.kernels.jit import BORROW, JIT, serial_and_parallel
 from hcloth_ros.core.kernels.layout import chunk_count, FREE
 from hcloth_ros.core.kernels.springs import spring_vector
 import numba
@@ -96,7 +96,7 @@ def excess_threshold(limit, tolerance):
     return buf[0]
 
 
-@numba.njit(**JIT)
+@numba.njit(**BORROW)
 def _spring_term(dx, dy, dz, length, valid, limit, threshold, a, b):
     """
     One spring's share of a sweep, from its vector ``d`` (first end to second) and length.
@@ -118,7 +118,7 @@ def _spring_term(dx, dy, dz, length, valid, limit, threshold, a, b):
             1.0 if moves else 0.0, moves & (length >= threshold))
 
 
-@numba.njit(**JIT)
+@numba.njit(**BORROW)
 def _direction(q, movable, valid, lo, stop, end, offset, limit, threshold, terms, e0, base):
     """
     Springs from flat points ``lo .. stop-1`` to the point ``offset`` further.
@@ -148,7 +148,7 @@ def _direction(q, movable, valid, lo, stop, end, offset, limit, threshold, terms
     return count
 
 
-@numba.njit(**JIT)
+@numba.njit(**BORROW)
 def _forward_terms(q, movable, masks, ra, rb, rows, cols, limit, threshold, terms, base):
     """
     Forward spring terms of rows ``ra .. rb-1`` into ``terms[:, k - base]``.
@@ -169,7 +169,7 @@ def _forward_terms(q, movable, masks, ra, rb, rows, cols, limit, threshold, term
     return count
 
 
-@numba.njit(**JIT)
+@numba.njit(**BORROW)
 def _term_views(terms, e, pad, cols):
     """
     Return the views of entry ``e``'s terms that a point's eight springs read.
@@ -183,7 +183,7 @@ def _term_views(terms, e, pad, cols):
             terms[12 + e, pad - cols + 1:])
 
 
-@numba.njit(**JIT)
+@numba.njit(**BORROW)
 def _gather(movable, terms, pad, cols, lo, hi, corr, active):
     """
     Write the corrections of flat points ``lo .. hi-1``: the mean of their springs' terms.
@@ -214,7 +214,7 @@ def _gather(movable, terms, pad, cols, lo, hi, corr, active):
     return moved
 
 
-@numba.njit(**JIT)
+@numba.njit(**BORROW)
 def _apply(q, qd, dv, corr, lo, hi, h):
     """``q += corr``, ``qd += corr / h``, ``dv += corr / h`` on flat points ``lo .. hi-1``."""
     for d in range(q.shape[0]):
@@ -225,7 +225,7 @@ def _apply(q, qd, dv, corr, lo, hi, h):
             w[i] += e[i] / h
 
 
-@numba.njit(**JIT)
+@numba.njit(**BORROW)
 def _apply_rows(q, qd, dv, corr, gathered, r0, r1, cols, h):
     """
     :func:`_apply` on the rows of ``r0 .. r1-1`` whose corrections this sweep gathered.
@@ -246,7 +246,7 @@ def _apply_rows(q, qd, dv, corr, gathered, r0, r1, cols, h):
         r = run
 
 
-@numba.njit(**JIT)
+@numba.njit(**BORROW)
 def _copy_terms(src, i, dst, j, n):
     """
     Copy ``src[:, i:i+n]`` to ``dst[:, j:j+n]``.
@@ -259,7 +259,7 @@ def _copy_terms(src, i, dst, j, n):
             b[k] = a[k]
 
 
-@numba.njit(**JIT)
+@numba.njit(**BORROW)
 def _any_flagged(row_flags, lo, hi):
     """Whether a row of ``lo .. hi-1`` (clipped to the grid) is flagged."""
     for r in range(max(lo, 0), min(hi, row_flags.size)):
@@ -268,7 +268,7 @@ def _any_flagged(row_flags, lo, hi):
     return False
 
 
-@numba.njit(**JIT)
+@numba.njit(**BORROW)
 def _flag_rows(terms, pad, cols, b0, b1, row_flags):
     """Flag rows ``b0 .. b1-1`` with a spring over its limit and a movable end."""
     for r in range(b0, b1):
@@ -281,7 +281,7 @@ def _flag_rows(terms, pad, cols, b0, b1, row_flags):
         row_flags[r] = total > 0.0
 
 
-@numba.njit(**JIT)
+@numba.njit(**BORROW)
 def _zero_columns(array, start, n):
     """Set ``array[:, start:start+n]`` to zero (a loop, as in :func:`_copy_terms`)."""
     for e in range(array.shape[0]):
@@ -290,7 +290,7 @@ def _zero_columns(array, start, n):
             row[k] = 0.0
 
 
-@numba.njit(**JIT)
+@numba.njit(**BORROW)
 def _chunk_sweep(q, qd, dv, corr, movable, masks, rows, cols, r0, r1, block_rows, limit,
                  threshold, h, edge_before, edge_after, terms, applied, was_over, now_over,
                  gathered, active, moved):
@@ -366,7 +366,7 @@ def _active_points(active, gathered, cols):
     return points
 
 
-@numba.njit(**JIT)
+@numba.njit(**BORROW)
 def _spring_exists(j, i, rows, cols):
     """Whether forward spring ``j`` (directions of :func:`_forward_terms`) leaves point i."""
     if i < 0 or i >= rows * cols:
@@ -379,7 +379,7 @@ def _spring_exists(j, i, rows, cols):
     return (j == 1) | ((j == 2) & (c + 1 < cols)) | ((j == 3) & (c > 0))
 
 
-@numba.njit(**JIT)
+@numba.njit(**BORROW)
 def _in_set(slot, members, size, key):
     """Whether ``key`` is among ``members[:size]``, ``slot[key]`` its position if so."""
     t = slot[key]
@@ -411,7 +411,7 @@ def _springs_of(points, rows, cols, offsets, spring_slot):
     return springs[:found]
 
 
-@numba.njit(**JIT)
+@numba.njit(**BORROW)
 def _row_candidates(q, r, rows, cols, offsets, close2, keys, found):
     """
     Append to ``keys`` the springs leaving row r longer than ``sqrt(close2[j])``.
