@@ -84,10 +84,11 @@ INLINE = {**JIT, 'inline': 'always'}
 # count of every array a call takes (atomic operations, each a call) on each path LLVM
 # cannot prove balanced, and a callee's error status makes most paths so. On the sliding
 # folded drop's replayed self-contact calls, those increments and decrements were 29 % of
-# the kernel's samples (``perf record``), and the calls took 300-330 ms instead of
-# 395-530 (issue 10's note, session 39). Numba itself refuses to compile such a kernel
-# if it allocates or calls one that does (no reference counting, no owner), so the flag
-# cannot leak memory. ``_nrt`` is a target option of numba's CPU target
+# the kernel's samples (``perf record``); without them the calls take a fifth less time
+# (median 423 against 523 ms over six alternated runs, the same results; the moving
+# bodies' kernel half: doc/self_contact_log.md, session 39). Numba refuses to compile
+# such a kernel if it allocates or calls one that does (no reference counting, no
+# owner), so the flag cannot leak memory. ``_nrt`` is a target option of numba's CPU target
 # (``numba.core.cpu``), named with an underscore and used by numba's own tests; a numba
 # without it compiles these kernels with reference counting (slower, the same results).
 _BORROWS = hasattr(numba.core.cpu.CPUTargetOptions, '_nrt')
