@@ -72,12 +72,13 @@ CACHE_DIR = cache_directory()
 JIT = {'cache': CACHE_DIR is not None, 'error_model': 'numpy', 'nogil': True}
 PJIT = {**JIT, 'parallel': True}
 # Helpers called once a pair or a point in the innermost loops, with arrays among their
-# arguments, inlined in numba's IR: a call LLVM leaves standing counts references to each
-# array passed (atomic increments and decrements). Self-contact's pushes so inlined: a
-# resting 129 x 129 cloth's carried layers 3.1-3.3 -> 2.4 ms (5,400 points), a sliding
-# step's first call 7.1-7.4 -> 6.7-6.9 ms, for 7 s more of its compilation (one-off copies
-# of the kernel timed on captured calls, issue 10's note). Each costs compilation wherever
-# it is called: kept to the few that pay.
+# arguments, inlined in numba's IR. First for the references each call counted (a
+# resting 129 x 129 cloth's carried layers 3.1-3.3 -> 2.4 ms, 5,400 points; a sliding
+# step's first call 7.1-7.4 -> 6.7-6.9 ms; one-off copies of the kernel timed on captured
+# calls, issue 10's note); BORROW now removes those counts, and inlining still pays: with
+# the pushes called instead, the replayed drop's landing took 12 % longer (session 39).
+# Each costs compilation wherever it is called (the pushes about 15 s in one cold
+# compile, session 39): kept to the few that pay.
 INLINE = {**JIT, 'inline': 'always'}
 # Kernels that only borrow arrays (they allocate none and return none): compiled without
 # numba's reference counting (NRT), which would otherwise increment and decrement the
