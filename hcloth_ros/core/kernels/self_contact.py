@@ -160,6 +160,14 @@ EDGE_PAIRS_PER_EDGE = 32
 # direction in _edge's numbering from its first end
 CELL_EDGES = np.array([(0, 0, 0, 1, 0), (0, 1, 0, 0, 1), (0, 1, 0, 1, 2), (1, 1, 0, 1, 0),
                        (0, 1, 1, 1, 1)], dtype=np.int64)
+# Most edges a block lists (:func:`_block_edges`: three a cell, and a block in the grid's
+# last row and column its cells' last row and column), and the flags it keeps of each
+BLOCK_EDGES = 3 * SUB * SUB + 2 * SUB
+EDGE_FRESH, EDGE_FREE, EDGE_CREASE = 1, 2, 4
+# A block in a list of blocks: its row shifted by this many bits, or-ed with its column
+# (read back without the integer divisions a row-major index takes: one a block listed
+# per point and per edge tested)
+BLOCK_BITS = 24
 
 
 @numba.njit(**BORROW)
@@ -540,8 +548,10 @@ def _below(nx, ny, nz, ax, ay, az, low):
 
 @numba.njit(**BORROW)
 def _overlap(a, b):
-    return (a[0] <= b[3] and b[0] <= a[3] and a[1] <= b[4] and b[1] <= a[4]
-            and a[2] <= b[5] and b[2] <= a[5])
+    # all six compared, one branch: where about one test in five passes (the edge and
+    # point tests' boxes), a branch per comparison mispredicted often
+    return (a[0] <= b[3]) & (b[0] <= a[3]) & (a[1] <= b[4]) & (b[1] <= a[4]) \
+        & (a[2] <= b[5]) & (b[2] <= a[5])
 
 
 @numba.njit(**BORROW)
@@ -848,15 +858,15 @@ def _near_blocks(subs, ends, shift, thickness, ai, aj, bi, bj, fresh_blocks, b_b
     List, for each block of patch A, the blocks of patch B it may come near; return how many.
 
     In the frame moving by ``shift``: ``near[a, :counts[a]]`` are the B blocks (as
-    ``si * width + sj``, in row-major order) whose box meets the box of A's block ``a``
-    (``a = (ui - ai per) per + uj - aj per``, ``per`` blocks a patch side, also on border
-    patches with fewer) grown by ``thickness``. A point's path lies in its block's box,
-    so a point tests only its block's list instead of every B block (760,000 box tests a
-    detection on the fold demo's resting layers, 2 % of them met), and so does an edge of
-    the block (:func:`_edge_against`). ``b_boxes`` holds B's
-    boxes. An A block with no vertex marked in ``fresh_blocks`` lists only the B blocks
-    with one (its points need no test against the others). ``work`` (at least (2, 6))
-    and ``kept`` (``per * per``) are scratch space.
+    ``si << BLOCK_BITS | sj``, :func:`_unpacked`, in row-major order) whose box meets the box
+    of A's block ``a`` (``a = (ui - ai per) per + uj - aj per``, ``per`` blocks a patch side, also
+    on border patches with fewer) grown by ``thickness``. A point's path lies in its block's
+    box, so a point tests only its block's list instead of every B block (760,000 box tests
+    a detection on the fold demo's resting layers, 2 % of them met), and so does an edge of
+    the block (:func:`_edge_against`). ``b_boxes`` holds B's boxes. An A block with no
+    vertex marked in ``fresh_blocks`` lists only the B blocks with one (its points need no
+    test against the others). ``work`` (at least (2, 6)) and ``kept`` (``per * per``) are
+    scratch space.
 
     Only the blocks that meet the other patch's box (``ends``, :func:`_patch_boxes`) are
     tested against each other: a block's box lies in its patch's, so the others meet no
@@ -866,18 +876,17 @@ def _near_blocks(subs, ends, shift, thickness, ai, aj, bi, bj, fresh_blocks, b_b
     pairs of patches, 450,000 box tests).
     """
     per = PATCH // SUB
-    width = subs.shape[1]
     s0, s1 = bi * per, min((bi + 1) * per, subs.shape[0])
     t0, t1 = bj * per, min((bj + 1) * per, subs.shape[1])
     _patch_block_boxes(subs, bi, bj, shift, b_boxes)
     box, patch = work[0], work[1]
-    # B's blocks that A's patch, grown by the thickness, meets (row-major)
+    # B's blocks that A's patch, grown by the thickness, meets (row-major, as in ``near``)
     _moving_box(ends[ai, aj], shift, thickness, patch)
     count = m = 0
     for si in range(s0, s1):
         for sj in range(t0, t1):
             if _overlap(patch, b_boxes[m]):
-                kept[count] = m
+                kept[count] = si << BLOCK_BITS | sj
                 count += 1
             m += 1
     _moving_box(ends[bi, bj], shift, 0.0, patch)
@@ -891,11 +900,10 @@ def _near_blocks(subs, ends, shift, thickness, ai, aj, bi, bj, fresh_blocks, b_b
             if not _overlap(box, patch):
                 continue
             for e in range(count):
-                m = kept[e]
-                si, sj = s0 + m // b_width, t0 + m % b_width
+                si, sj = _unpacked(kept[e])
                 if (fresh_blocks[ui, uj] or fresh_blocks[si, sj]) and \
-                        _overlap(box, b_boxes[m]):
-                    near[a, counts[a]] = si * width + sj
+                        _overlap(box, b_boxes[(si - s0) * b_width + sj - t0]):
+                    near[a, counts[a]] = kept[e]
                     counts[a] += 1
                     listed += 1
     return listed
@@ -935,7 +943,7 @@ def _points_against(x0, x1, rows, cols, thickness, substeps, subs, shift, ai, aj
             moved = fresh[p]
             _path_box(x0, x1, p, shift, thickness, path)
             for e in range(counts[a]):
-                si, sj = near[a, e] // width, near[a, e] % width
+                si, sj = _unpacked(near[a, e])
                 if not (moved or fresh_blocks[si, sj]):
                     continue
                 # B's boxes in _near_blocks' order
@@ -1089,88 +1097,130 @@ def _segment_box(x0, x1, a, b, shift, reach, out):
 
 
 @numba.njit(**BORROW)
-def _edge_against(x0, x1, rows, cols, thickness, substeps, subs, shift, e, bi, bj, fresh,
-                  fresh_blocks, pairs, sides, count, boxes, b_boxes, crease, near, near_count,
-                  seg_boxes, seg_ready):
+def _block_edges(x0, x1, rows, cols, si, sj, shift, fresh, crease, boxes, ends):
+    """
+    List block (si, sj)'s edges for :func:`_edge_against`; return how many.
+
+    Each cell's edge along its first row, down its first column and its diagonal, and
+    along the grid's last row and column those of its cells there, cell by cell in
+    row-major order (d as ``CELL_EDGES``). ``boxes[q]``: the box edge q sweeps in the
+    frame moving by ``shift``; ``ends[q]``: its index (:func:`_edge`), its two ends, their
+    rows (first, last) and columns, and flags: ``EDGE_FRESH`` (an end marked in
+    ``fresh``), ``EDGE_FREE`` (on the grid's border), ``EDGE_CREASE`` (flagged in
+    ``crease``). Made once a way round of a pair of patches, where a block is first
+    tested: every edge tested against the block reads them instead of working out each
+    of its edges again.
+    """
+    q = 0
+    for u in range(si * SUB, min((si + 1) * SUB, rows - 1)):
+        for v in range(sj * SUB, min((sj + 1) * SUB, cols - 1)):
+            for d in range(5):
+                if d == 3 and u != rows - 2 or d == 4 and v != cols - 2:
+                    continue
+                # the cell's last row or column edge: the grid's border. Its ends' rows
+                # and columns from the cell's
+                r_lo, r_hi = u + CELL_EDGES[d, 0], u + CELL_EDGES[d, 1]
+                c_lo, c_hi = v + CELL_EDGES[d, 2], v + CELL_EDGES[d, 3]
+                c, dd = r_lo * cols + c_lo, r_hi * cols + c_hi
+                f = 3 * c + CELL_EDGES[d, 4]
+                flags = EDGE_FRESH if fresh[c] or fresh[dd] else 0
+                if (r_lo == r_hi and (r_lo == 0 or r_lo == rows - 1)) or \
+                        (c_lo == c_hi and (c_lo == 0 or c_lo == cols - 1)):
+                    flags |= EDGE_FREE
+                if crease[f]:
+                    flags |= EDGE_CREASE
+                out = ends[q]
+                out[0], out[1], out[2] = f, c, dd
+                out[3], out[4], out[5], out[6] = r_lo, r_hi, c_lo, c_hi
+                out[7] = flags
+                _segment_box(x0, x1, c, dd, shift, 0.0, boxes[q])
+                q += 1
+    return q
+
+
+@numba.njit(**BORROW)
+def _edge_against(x0, x1, rows, cols, thickness, substeps, subs, shift, e, r, c, bi, bj,
+                  fresh, fresh_blocks, pairs, sides, count, boxes, b_boxes, crease, near,
+                  near_count, seg_boxes, seg_ends, seg_count):
     """
     Test edge e, free or a crease, against the edges of patch B; returns the new pair count.
 
-    B's edges: each cell's edge along its first row, down its first column and its
-    diagonal, and along the grid's last row and column those of its cells there. Edges
-    with an end within ``RING`` rows and columns of one of e's are skipped (the cloth's
-    own surface), and each pair is tested once: of two free edges, from the lower index;
-    a free edge and another, from the free edge; of two creases (``crease``: the flags of
-    :func:`_patch_creases`, e one of them unless it is free), from the lower index.
-    Only pairs with an end marked in ``fresh`` are tested (``fresh_blocks``: the blocks
-    with one, see :func:`_fresh_blocks`). ``boxes``: room for a box (6 numbers);
-    ``b_boxes``: the boxes B's blocks sweep in the frame moving by ``shift``, in row-major
-    order (:func:`_moving_box`). ``near[:near_count]``: the B blocks e may come near,
-    those of its block's list (:func:`_near_blocks`; the block holds both of e's ends, so
-    its box holds e's path): looping over all of B's blocks instead was 87,000 box tests a
+    (r, c): e's first end's row and column (from the index, integer divisions took a
+    tenth of the edge tests' enumeration).
+    B's edges: those :func:`_block_edges` lists. Edges with an end within ``RING`` rows
+    and columns of one of e's are skipped (the cloth's own surface), and each pair is
+    tested once: of two free edges, from the lower index; a free edge and another, from
+    the free edge; of two creases (``crease``: the flags of :func:`_patch_creases`, e one
+    of them unless it is free), from the lower index. Only pairs with an end marked in
+    ``fresh`` are tested (``fresh_blocks``: the blocks with one, see
+    :func:`_fresh_blocks`). ``boxes``: room for a box (6 numbers); ``b_boxes``: the boxes
+    B's blocks sweep in the frame moving by ``shift``, in row-major order
+    (:func:`_moving_box`). ``near[:near_count]``: the B blocks e may come near, those of
+    its block's list (:func:`_near_blocks`; the block holds both of e's ends, so its box
+    holds e's path): looping over all of B's blocks instead was 87,000 box tests a
     detection, 2 % of them met, on the folded drop's landing at 129 x 129.
-    ``seg_boxes[m, 5 c + d]``: the box B's listed block m's edge d of its cell c (row-major
-    in the block; d as ``CELL_EDGES``) sweeps, made at its first test in this way round of
-    the pair and marked in ``seg_ready`` (made once a test, they were a third of the edge
-    tests' time on the folded drop).
+    ``seg_boxes[m]``, ``seg_ends[m]`` and ``seg_count[m]``: B's listed block m's edges
+    (:func:`_block_edges`), made at its first test in this way round of the pair
+    (``seg_count`` -1 until then). The boxes are tested first: of the edges the other
+    tests let through, they rule out two in three (the folded drop's layers sliding over
+    each other, 22,000 edges a call).
     """
     a, b = _edge(e, cols)
-    free = _on_border(a, b, rows, cols)
+    d = e % 3
+    ra0, ra1 = r, r + (1 if d > 0 else 0)
+    ca0, ca1 = c, c + (0 if d == 1 else 1)
+    free = (ra0 == ra1 and (r == 0 or r == rows - 1)) or \
+        (ca0 == ca1 and (c == 0 or c == cols - 1))
     moved = fresh[a] or fresh[b]
-    ra0, ra1 = min(a // cols, b // cols), max(a // cols, b // cols)
-    ca0, ca1 = min(a % cols, b % cols), max(a % cols, b % cols)
     box = boxes[0]
     _segment_box(x0, x1, a, b, shift, thickness, box)
     per = PATCH // SUB
     width = subs.shape[1]
     b_width = min((bj + 1) * per, width) - bj * per
     for listed in range(near_count):
-        si, sj = near[listed] // width, near[listed] % width
+        si, sj = _unpacked(near[listed])
         if not (moved or fresh_blocks[si, sj]):
             continue
         m = (si - bi * per) * b_width + sj - bj * per
         if not _overlap(box, b_boxes[m]):
             continue
-        for u in range(si * SUB, min((si + 1) * SUB, rows - 1)):
-            for v in range(sj * SUB, min((sj + 1) * SUB, cols - 1)):
-                for d in range(5):
-                    if d == 3 and u != rows - 2 or d == 4 and v != cols - 2:
-                        continue
-                    # the cell's last row or column edge: the grid's border. Its ends' rows
-                    # and columns from the cell's (integer divisions of the indices were
-                    # half the time of these loops)
-                    r_lo, r_hi = u + CELL_EDGES[d, 0], u + CELL_EDGES[d, 1]
-                    c_lo, c_hi = v + CELL_EDGES[d, 2], v + CELL_EDGES[d, 3]
-                    c, dd = r_lo * cols + c_lo, r_hi * cols + c_hi
-                    if not (moved or fresh[c] or fresh[dd]):
-                        continue
-                    if ra0 - RING <= r_hi and r_lo <= ra1 + RING and \
-                            ca0 - RING <= c_hi and c_lo <= ca1 + RING:
-                        continue
-                    f = 3 * c + CELL_EDGES[d, 4]
-                    if (r_lo == r_hi and (r_lo == 0 or r_lo == rows - 1)) or \
-                            (c_lo == c_hi and (c_lo == 0 or c_lo == cols - 1)):
-                        if not free or f < e:
-                            continue    # found as e's partner when f was tested
-                    elif not free and f < e and crease[f]:
-                        continue        # the same
-                    slot = 5 * ((u - si * SUB) * SUB + v - sj * SUB) + d
-                    if not seg_ready[m, slot]:
-                        _segment_box(x0, x1, c, dd, shift, 0.0, seg_boxes[m, slot])
-                        seg_ready[m, slot] = True
-                    if not _overlap(box, seg_boxes[m, slot]):
-                        continue
-                    # a crease is kept from crossing, not a thickness away: the turns
-                    # of a rolled border, creased past the bound, pushed apart,
-                    # stretched a double fold's springs to 4.5 at 129 x 129 where
-                    # crossings alone leave 0.77 (1.13 without creases)
-                    side = _edge_side(x0, x1, a, b, c, dd, thickness, substeps, shift,
-                                      free)
-                    if side != 0.0:
-                        if count < pairs.shape[0]:
-                            pairs[count, 0], pairs[count, 1] = e, f
-                            sides[count] = side
-                        count += 1
+        if seg_count[m] < 0:
+            seg_count[m] = _block_edges(x0, x1, rows, cols, si, sj, shift, fresh, crease,
+                                        seg_boxes[m], seg_ends[m])
+        for q in range(seg_count[m]):
+            if not _overlap(box, seg_boxes[m, q]):
+                continue
+            ends = seg_ends[m, q]
+            flags = ends[7]
+            if not (moved or flags & EDGE_FRESH):
+                continue
+            if ra0 - RING <= ends[4] and ends[3] <= ra1 + RING and \
+                    ca0 - RING <= ends[6] and ends[5] <= ca1 + RING:
+                continue
+            f = ends[0]
+            if flags & EDGE_FREE:
+                if not free or f < e:
+                    continue    # found as e's partner when f was tested
+            elif not free and f < e and flags & EDGE_CREASE:
+                continue        # the same
+            # a crease is kept from crossing, not a thickness away: the turns of a rolled
+            # border, creased past the bound, pushed apart, stretched a double fold's
+            # springs to 4.5 at 129 x 129 where crossings alone leave 0.77 (1.13 without
+            # creases)
+            side = _edge_side(x0, x1, a, b, ends[1], ends[2], thickness, substeps, shift,
+                              free)
+            if side != 0.0:
+                if count < pairs.shape[0]:
+                    pairs[count, 0], pairs[count, 1] = e, f
+                    sides[count] = side
+                count += 1
     return count
+
+
+@numba.njit(**BORROW)
+def _unpacked(block):
+    """Return the (row, column) of a block as :func:`_near_blocks` lists it."""
+    return block >> BLOCK_BITS, block & ((1 << BLOCK_BITS) - 1)
 
 
 @numba.njit(**BORROW)
@@ -1189,15 +1239,15 @@ def _block_of(r, c, ai, aj, rows, cols):
 @numba.njit(**BORROW)
 def _free_edges_against(x0, x1, rows, cols, thickness, substeps, subs, shift, ai, aj, bi,
                         bj, fresh, fresh_blocks, dirty, pairs, sides, count, crease, b_boxes,
-                        near, counts, boxes, seg_boxes, seg_ready):
+                        near, counts, boxes, seg_boxes, seg_ends, seg_count):
     """
     Test patch A's edges on the grid's border against patch B's edges (see _edge_against).
 
     An edge with no end marked in ``fresh`` is tested only if B has a block marked in
     ``fresh_blocks`` (``dirty``: such patches). ``b_boxes``, ``near`` and ``counts``: B's
     blocks' boxes and A's blocks' lists of them, as :func:`_near_blocks` left them for
-    this pair; ``boxes``: room for a box; ``seg_boxes`` and ``seg_ready``: B's blocks'
-    edges' boxes (see _edge_against).
+    this pair; ``boxes``: room for a box; ``seg_boxes``, ``seg_ends`` and ``seg_count``:
+    B's blocks' edges (see _edge_against).
     """
     r0, r1 = ai * PATCH, min((ai + 1) * PATCH, rows - 1)
     c0, c1 = aj * PATCH, min((aj + 1) * PATCH, cols - 1)
@@ -1210,9 +1260,10 @@ def _free_edges_against(x0, x1, rows, cols, thickness, substeps, subs, shift, ai
                 block = _block_of(row, c, ai, aj, rows, cols)
                 if counts[block] and (dirty[bi, bj] or fresh[a] or fresh[b]):
                     count = _edge_against(x0, x1, rows, cols, thickness, substeps, subs,
-                                          shift, e, bi, bj, fresh, fresh_blocks, pairs,
-                                          sides, count, boxes, b_boxes, crease, near[block],
-                                          counts[block], seg_boxes, seg_ready)
+                                          shift, e, row, c, bi, bj, fresh, fresh_blocks,
+                                          pairs, sides, count, boxes, b_boxes, crease,
+                                          near[block], counts[block], seg_boxes, seg_ends,
+                                          seg_count)
         if side == 2 and c0 == 0 or side == 3 and c1 == cols - 1:
             col = 0 if side == 2 else cols - 1
             for r in range(r0, r1):
@@ -1221,16 +1272,17 @@ def _free_edges_against(x0, x1, rows, cols, thickness, substeps, subs, shift, ai
                 block = _block_of(r, col, ai, aj, rows, cols)
                 if counts[block] and (dirty[bi, bj] or fresh[a] or fresh[b]):
                     count = _edge_against(x0, x1, rows, cols, thickness, substeps, subs,
-                                          shift, e, bi, bj, fresh, fresh_blocks, pairs,
-                                          sides, count, boxes, b_boxes, crease, near[block],
-                                          counts[block], seg_boxes, seg_ready)
+                                          shift, e, r, col, bi, bj, fresh, fresh_blocks,
+                                          pairs, sides, count, boxes, b_boxes, crease,
+                                          near[block], counts[block], seg_boxes, seg_ends,
+                                          seg_count)
     return count
 
 
 @numba.njit(**BORROW)
 def _crease_edges_against(x0, x1, rows, cols, thickness, substeps, subs, shift, ai, aj, bi,
                           bj, fresh, fresh_blocks, dirty, pairs, sides, count, crease,
-                          b_boxes, near, counts, boxes, seg_boxes, seg_ready):
+                          b_boxes, near, counts, boxes, seg_boxes, seg_ends, seg_count):
     """
     Test patch A's creases against patch B's edges (see _edge_against and _patch_creases).
 
@@ -1238,8 +1290,8 @@ def _crease_edges_against(x0, x1, rows, cols, thickness, substeps, subs, shift, 
     with no point passing through or coming near a triangle (a cloth folded twice, where
     the second fold crosses the first, tangled so at 65 x 65). An edge with no end marked
     in ``fresh`` is tested only if B has a block marked in ``fresh_blocks`` (``dirty``).
-    ``b_boxes``, ``near``, ``counts``, ``boxes``, ``seg_boxes`` and ``seg_ready``: as
-    :func:`_free_edges_against` takes them.
+    ``b_boxes``, ``near``, ``counts``, ``boxes``, ``seg_boxes``, ``seg_ends`` and
+    ``seg_count``: as :func:`_free_edges_against` takes them.
     """
     for r in range(ai * PATCH, min((ai + 1) * PATCH, rows - 1)):
         for c in range(aj * PATCH, min((aj + 1) * PATCH, cols - 1)):
@@ -1255,9 +1307,9 @@ def _crease_edges_against(x0, x1, rows, cols, thickness, substeps, subs, shift, 
                 if not (dirty[bi, bj] or fresh[a] or fresh[b]):
                     continue
                 count = _edge_against(x0, x1, rows, cols, thickness, substeps, subs, shift,
-                                      e, bi, bj, fresh, fresh_blocks, pairs, sides, count,
+                                      e, r, c, bi, bj, fresh, fresh_blocks, pairs, sides, count,
                                       boxes, b_boxes, crease, near[block], counts[block],
-                                      seg_boxes, seg_ready)
+                                      seg_boxes, seg_ends, seg_count)
     return count
 
 
@@ -1399,8 +1451,9 @@ def _detect(x0, x1, rows, cols, thickness, substeps, dirty, fresh, fresh_blocks,
     tri_ready = np.empty(per * per, dtype=np.bool_)
     work, kept = np.empty((3, 6)), np.empty(per * per, dtype=np.int64)     # scratch
     edge_boxes = np.empty((1, 6))
-    seg_boxes = np.empty((per * per, 5 * SUB * SUB, 6))
-    seg_ready = np.empty((per * per, 5 * SUB * SUB), dtype=np.bool_)
+    seg_boxes = np.empty((per * per, BLOCK_EDGES, 6))
+    seg_ends = np.empty((per * per, BLOCK_EDGES, 8), dtype=np.int64)
+    seg_count = np.empty(per * per, dtype=np.int64)
     creased = np.full((pr, pc), -1, dtype=np.int8)     # per patch: unknown, no, yes
     normals = np.empty((PATCH + 1, PATCH + 1, 2, 4))     # see _patch_creases
     # sweep and prune along x over the patches' boxes
@@ -1408,14 +1461,16 @@ def _detect(x0, x1, rows, cols, thickness, substeps, dirty, fresh, fresh_blocks,
     for a in range(pr * pc):
         lows[a] = boxes[a // pc, a % pc, 0]
     order = np.argsort(lows)
+    # (rows and columns once: an integer division a patch tested was a tenth of the sweep)
+    order_i, order_j = order // pc, order % pc
     angles = _cone_angles(cones)
     count = edge_count = 0
     for m in range(pr * pc):
         a = order[m]
-        ai, aj = a // pc, a % pc
+        ai, aj = order_i[m], order_j[m]
         for m2 in range(m, pr * pc):
             b = order[m2]
-            bi, bj = b // pc, b % pc
+            bi, bj = order_i[m2], order_j[m2]
             if boxes[bi, bj, 0] > boxes[ai, aj, 3]:
                 break
             if not (dirty[ai, aj] or dirty[bi, bj]):
@@ -1456,13 +1511,13 @@ def _detect(x0, x1, rows, cols, thickness, substeps, dirty, fresh, fresh_blocks,
                                         patch_i, patch_j, other_i, other_j, fresh,
                                         fresh_blocks, pairs, sides, count, b_boxes, near,
                                         counts, tri_boxes, tri_ready, work)
-                seg_ready[:, :] = False     # (B's edges' boxes, in this pair's frame)
+                seg_count[:] = -1     # (B's blocks' edges, in this pair's frame)
                 if patch_i == 0 or patch_i == pr - 1 or patch_j == 0 or patch_j == pc - 1:
                     edge_count = _free_edges_against(
                         x0, x1, rows, cols, thickness, substeps, subs, shift, patch_i,
                         patch_j, other_i, other_j, fresh, fresh_blocks, dirty, edge_pairs,
                         edge_sides, edge_count, crease, b_boxes, near, counts, edge_boxes,
-                        seg_boxes, seg_ready)
+                        seg_boxes, seg_ends, seg_count)
                 # (most patches have no crease: their flags read once a detection)
                 if creased[patch_i, patch_j] < 0:
                     creased[patch_i, patch_j] = _has_creases(crease, rows, cols, patch_i,
@@ -1472,7 +1527,7 @@ def _detect(x0, x1, rows, cols, thickness, substeps, dirty, fresh, fresh_blocks,
                         x0, x1, rows, cols, thickness, substeps, subs, shift, patch_i,
                         patch_j, other_i, other_j, fresh, fresh_blocks, dirty, edge_pairs,
                         edge_sides, edge_count, crease, b_boxes, near, counts, edge_boxes,
-                        seg_boxes, seg_ready)
+                        seg_boxes, seg_ends, seg_count)
                 if a == b:
                     break
     return count, edge_count
