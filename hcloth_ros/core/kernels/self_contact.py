@@ -424,7 +424,7 @@ def _root(cubic, ta, tb, guess):
     return t
 
 
-@numba.njit(**BORROW)
+@numba.njit(**BORROW_INLINE)
 def _near(x1, p, i, j, k, thickness):
     """
     Side (+-1) if p ends nearer than ``thickness`` to triangle (i, j, k), else 0.
@@ -741,7 +741,7 @@ def _path_box(x0, x1, p, shift, reach, out):
         out[3 + d] = max(x0[d, p], x1[d, p] - shift[d]) + reach
 
 
-@numba.njit(**BORROW)
+@numba.njit(**BORROW_INLINE)
 def _pair_side(x0, x1, p, i, j, k, thickness, substeps, shift, rows, cols):
     """
     Whether p and triangle (i, j, k) make a pair: its side if it crossed (+-2) or ends near (+-1).
@@ -814,7 +814,7 @@ def _may_change(c0, c1, c2, c3, margin):
     return not (low > margin or high < -margin)
 
 
-@numba.njit(**BORROW)
+@numba.njit(**BORROW_INLINE)
 def _side_cubic(x0, x1, p, i, j, k):
     """
     Return p's side of triangle (i, j, k)'s plane as a cubic in time, and its rounding.
@@ -1045,7 +1045,10 @@ def _edges_meet(a, b, c, d, thickness):
     return _gap(a, b, c, d, s, t)[3] < thickness
 
 
-@numba.njit(**BORROW)
+# inlined, as _pair_side, _side_cubic and _near are: called once for each pair tested, a
+# sixth of its own time went to reading back the arrays its caller had just written to
+# the stack for the call (2.5 % of a replayed call; 1 s more to compile)
+@numba.njit(**BORROW_INLINE)
 def _edge_side(x0, x1, a, b, c, d, thickness, substeps, shift, near=True):
     """
     Whether edges a-b and c-d make a pair: a-b's side if it crossed c-d (+-2) or ends near (+-1).
