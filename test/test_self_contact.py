@@ -1985,3 +1985,45 @@ def test_a_folded_cloth_at_rest_costs_no_pairs_once_carried():
         found.append(report.extra['self_contact_pairs'])
         assert violations(before, state.q[2], THICKNESS) == (0, 0)
     assert found[0] > 1000 and found[30:] == [0] * 15
+
+
+def test_the_blocks_list_every_edge_of_the_grid_once_with_its_ends_and_flags():
+    """
+    ``_block_edges`` over all blocks: each of the grid's edges exactly once.
+
+    The check is against the edge numbering (``_edge``) and the border test
+    (``_on_border``), on a grid whose sides are not a multiple of the block size.
+    """
+    from hcloth_ros.core.kernels.self_contact import (_block_edges, _edge, _on_border,
+                                                      _unpacked, BLOCK_BITS, BLOCK_EDGES,
+                                                      EDGE_CREASE, EDGE_FREE, EDGE_FRESH)
+    rows, cols = 2 * SUB + 2, 3 * SUB + 1      # last blocks are partial
+    n = rows * cols
+    rng = np.random.default_rng(3)
+    x0 = rng.normal(size=(3, n))
+    x1 = x0 + 0.1 * rng.normal(size=(3, n))
+    shift = np.array([0.01, -0.02, 0.03])
+    fresh = rng.random(n) < 0.3
+    crease = (rng.random(3 * n) < 0.3).astype(np.uint8)
+    boxes, ends = np.empty((BLOCK_EDGES, 6)), np.empty((BLOCK_EDGES, 8), dtype=np.int64)
+    seen = []
+    for si in range((rows - 2) // SUB + 1):
+        for sj in range((cols - 2) // SUB + 1):
+            assert _unpacked(si << BLOCK_BITS | sj) == (si, sj)
+            for q in range(_block_edges(x0, x1, rows, cols, si, sj, shift, fresh, crease,
+                                        boxes, ends)):
+                f, c, d, r_lo, r_hi, c_lo, c_hi, flags = ends[q]
+                seen.append(f)
+                assert (c, d) == _edge(f, cols)
+                assert (r_lo, r_hi, c_lo, c_hi) == (c // cols, d // cols, c % cols, d % cols)
+                assert bool(flags & EDGE_FREE) == _on_border(c, d, rows, cols)
+                assert bool(flags & EDGE_FRESH) == bool(fresh[c] or fresh[d])
+                assert bool(flags & EDGE_CREASE) == bool(crease[f])
+                ends_xyz = np.concatenate([x0[:, [c, d]], x1[:, [c, d]] - shift[:, None]], 1)
+                np.testing.assert_array_equal(boxes[q, :3], ends_xyz.min(axis=1))
+                np.testing.assert_array_equal(boxes[q, 3:], ends_xyz.max(axis=1))
+    # every edge: along each row, down each column, and each cell's diagonal
+    expected = [3 * (r * cols + c) + 0 for r in range(rows) for c in range(cols - 1)] + \
+        [3 * (r * cols + c) + 1 for r in range(rows - 1) for c in range(cols)] + \
+        [3 * (r * cols + c) + 2 for r in range(rows - 1) for c in range(cols - 1)]
+    assert sorted(seen) == sorted(expected)

@@ -42,7 +42,7 @@ import numba  # noqa: E402
 import numpy as np  # noqa: E402
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from self_contact_replay import crease_angle  # noqa: E402 (the tool next to this one)
+from self_contact_replay import add_to_digest, crease_angle, fresh  # noqa: E402 (next to this)
 
 
 def load(path):
@@ -60,11 +60,6 @@ def load(path):
     return module.self_contact
 
 
-def fresh(arguments):
-    """Return a call's arguments with every array copied (the kernel writes to them)."""
-    return [a.copy() if isinstance(a, np.ndarray) else a for a in arguments]
-
-
 def compare(kernels, calls, repeats):
     """Return each version's fastest time a call (2, calls) and its results' digest."""
     best = np.full((2, len(calls)), np.inf)
@@ -77,9 +72,7 @@ def compare(kernels, calls, repeats):
                 result = kernels[v](*copies)
                 best[v, c] = min(best[v, c], time.perf_counter() - start)
                 if round_ == 0:
-                    for written in copies[:3]:      # q, qd, dv
-                        digests[v].update(written.tobytes())
-                    digests[v].update(repr(tuple(int(x) for x in result)).encode())
+                    add_to_digest(digests[v], copies, result)
         print(f'\r{os.path.basename(calls.name)}: round {round_ + 1} of {repeats}', end='',
               flush=True)
     print()

@@ -91,16 +91,26 @@ def replay(calls, repeats, chained=False):
             arguments = list(arguments)
             arguments[CACHE] = left
         for _ in range(repeats):
-            copies = [a.copy() if isinstance(a, np.ndarray) else a for a in arguments]
+            copies = fresh(arguments)
             start = time.perf_counter()
             result = kernel(*copies)
             times.append(time.perf_counter() - start)
         best.append(min(times))
         left = copies[CACHE]
-        for written in copies[:3]:      # q, qd, dv
-            digest.update(written.tobytes())
-        digest.update(repr(tuple(int(v) for v in result)).encode())
+        add_to_digest(digest, copies, result)
     return np.array(best), digest.hexdigest()[:12]
+
+
+def fresh(arguments):
+    """Return a call's arguments with every array copied (the kernel writes to them)."""
+    return [a.copy() if isinstance(a, np.ndarray) else a for a in arguments]
+
+
+def add_to_digest(digest, copies, result):
+    """Add what a call wrote (q, qd, dv: its first three arguments) and returned to ``digest``."""
+    for written in copies[:3]:
+        digest.update(written.tobytes())
+    digest.update(repr(tuple(int(v) for v in result)).encode())
 
 
 def crease_angle(arguments):
