@@ -2005,7 +2005,7 @@ def test_the_blocks_list_every_edge_of_the_grid_once_with_its_ends_and_flags():
     shift = np.array([0.01, -0.02, 0.03])
     fresh = rng.random(n) < 0.3
     crease = (rng.random(3 * n) < 0.3).astype(np.uint8)
-    boxes, ends = np.empty((BLOCK_EDGES, 6)), np.empty((BLOCK_EDGES, 8), dtype=np.int64)
+    boxes, ends = np.empty((6, BLOCK_EDGES)), np.empty((BLOCK_EDGES, 8), dtype=np.int64)
     seen = []
     for si in range((rows - 2) // SUB + 1):
         for sj in range((cols - 2) // SUB + 1):
@@ -2020,10 +2020,27 @@ def test_the_blocks_list_every_edge_of_the_grid_once_with_its_ends_and_flags():
                 assert bool(flags & EDGE_FRESH) == bool(fresh[c] or fresh[d])
                 assert bool(flags & EDGE_CREASE) == bool(crease[f])
                 ends_xyz = np.concatenate([x0[:, [c, d]], x1[:, [c, d]] - shift[:, None]], 1)
-                np.testing.assert_array_equal(boxes[q, :3], ends_xyz.min(axis=1))
-                np.testing.assert_array_equal(boxes[q, 3:], ends_xyz.max(axis=1))
+                np.testing.assert_array_equal(boxes[:3, q], ends_xyz.min(axis=1))
+                np.testing.assert_array_equal(boxes[3:, q], ends_xyz.max(axis=1))
     # every edge: along each row, down each column, and each cell's diagonal
     expected = [3 * (r * cols + c) + 0 for r in range(rows) for c in range(cols - 1)] + \
         [3 * (r * cols + c) + 1 for r in range(rows - 1) for c in range(cols)] + \
         [3 * (r * cols + c) + 2 for r in range(rows - 1) for c in range(cols - 1)]
     assert sorted(seen) == sorted(expected)
+
+
+def test_boxes_overlap_as_their_bounds_compare():
+    """
+    ``_overlap`` (the largest of the six gaps) agrees with the six comparisons.
+
+    On random boxes, with bounds drawn from a few values so that many touch exactly (a
+    gap of zero meets), and with tiny and large coordinates, where a difference rounds.
+    """
+    from hcloth_ros.core.kernels.self_contact import _overlap
+    rng = np.random.default_rng(5)
+    for scale in (1e-300, 1.0, 1e300):
+        for _ in range(2000):
+            a, b = (np.sort(rng.choice([-1.0, 0.0, 0.5, 1.0], size=(2, 3)), axis=0).ravel()
+                    * scale * rng.choice([1.0, 1.0 + 2 ** -52]) for _ in range(2))
+            expected = all(a[d] <= b[3 + d] and b[d] <= a[3 + d] for d in range(3))
+            assert _overlap(a, b) == expected, (a, b)
