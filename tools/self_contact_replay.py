@@ -14,7 +14,8 @@ calls in all, the median and mean of a step's calls, the same for the steps' fir
 and for their later ones, and a digest of what the calls wrote (positions, velocities,
 velocity changes) and returned (pair counts, sub-intervals, pairs dropped, whether it
 ended clean; until 2026-11-30, session 38, the digest held only what they wrote): a change
-to the kernel that gives the same digest gave the same result on every call. Each call
+to the kernel that gives the same digest gave the same result on every call. A capture
+also prints the digest of the calls as they ran, which the replay's matches. Each call
 starts from the cache (boxes, flags, what lies on what) its capture held, so the digest
 shows what one call does, not what it leaves to the next; ``--chained`` gives a step's
 later calls the cache the replay of its call before left instead (their positions stay
@@ -40,20 +41,28 @@ import numpy as np
 
 
 def capture(size, first, last):
-    """Return ``[(step, arguments)]`` of the finest level's kernel calls in steps first..last."""
+    """
+    Return the finest level's kernel calls in steps first..last and their results' digest.
+
+    ``[(step, arguments)]``, each argument copied before the call (the kernel writes to
+    them), and the digest of what those calls wrote and returned as they ran (as
+    :func:`replay` makes it): a replay that gives the same digest did the same work.
+    """
     from hcloth_ros.bench.self_contact import scene_setup
     from hcloth_ros.core import make_solver
     model, state, control = scene_setup(size, 'folded')
     solver = make_solver('multigrid', model, thickness=0.004)
     finest = model.level_count - 1
     kit = solver.kernels(finest)
-    calls, now = [], [0]
+    calls, now, digest = [], [0], hashlib.sha1()
 
     def kept(*arguments):
-        if first <= now[0] <= last:
-            calls.append((now[0], [a.copy() if isinstance(a, np.ndarray) else a
-                                   for a in arguments]))
-        return kit.self_contact(*arguments)
+        if not first <= now[0] <= last:
+            return kit.self_contact(*arguments)
+        calls.append((now[0], fresh(arguments)))
+        result = kit.self_contact(*arguments)
+        add_to_digest(digest, arguments, result)
+        return result
 
     class Capturing:
 
@@ -66,7 +75,7 @@ def capture(size, first, last):
         solver.step(state, control, 1 / 60)
         print(f'\rstep {step} of {last}, {len(calls)} calls kept', end='', flush=True)
     print()
-    return calls
+    return calls, digest.hexdigest()[:12]
 
 
 # Where a call's arguments hold the patch cache (boxes .. the triangles points lie on) and
@@ -157,7 +166,8 @@ def main(argv=None):
         calls = [(step, crease_angle(arguments)) for step, arguments in calls]
     else:
         first, last = (int(v) for v in args.steps.split(':'))
-        calls = capture(args.size, first, last)
+        calls, captured = capture(args.size, first, last)
+        print(f'digest of the calls as they ran: {captured}')
         if args.save:
             with open(args.save, 'wb') as f:
                 pickle.dump(calls, f)

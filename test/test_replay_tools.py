@@ -1,0 +1,85 @@
+"""The self-contact kernel's replay tools: ``tools/self_contact_replay.py`` and ``_ab.py``."""
+
+import hashlib
+import os
+
+from conftest import load_tool
+import numpy as np
+
+
+def test_replayed_calls_do_what_the_captured_ones_did():
+    """
+    Calls captured from the folded drop, replayed alone, write and return what they did.
+
+    33 x 33, steps 15-30: the layers meet, so some calls find pairs, and some steps call
+    the kernel again after strain limiting (a later call keeps its step's cache). The
+    replay's digest (positions, velocities, velocity changes and results of every call)
+    equals the digest of the calls as they ran in the drop: each call's arguments were
+    copied before it wrote to them. Replayed from the cache the call before left
+    (``chained``), the calls do the same too (as captured, each call's cache is the
+    one the call before it left).
+    """
+    tool = load_tool('self_contact_replay')
+    calls, captured = tool.capture(33, 15, 30)
+    assert len({step for step, _ in calls}) == 16 and len(calls) > 16
+    seconds, digest = tool.replay(calls, 1)
+    assert digest == captured and seconds.shape == (len(calls),)
+    assert tool.replay(calls, 1, chained=True)[1] == captured
+    # the calls found pairs: contact work, not only empty checks
+    kernel = tool.importlib.import_module('hcloth_ros.core.kernels.self_contact')
+    assert sum(kernel.self_contact(*tool.fresh(a))[0] for _, a in calls) > 0
+
+
+def _fake_kernel(scale):
+    """Return a stand-in kernel: it scales q (its first argument) in place, returns a result."""
+    def self_contact(q, qd, dv, *rest):
+        q *= scale
+        return 1, 2, 0, True
+    return self_contact
+
+
+def test_the_ab_tool_times_both_versions_on_every_call_and_tells_their_results_apart(
+        monkeypatch, tmp_path):
+    """
+    ``compare`` runs both versions on fresh copies of every call, and digests each.
+
+    Two stand-in kernels: the same one twice gives equal digests, one that writes other
+    positions a different digest; each version has a finite fastest time per call, and
+    the calls' arrays are not written to (each run gets copies).
+    """
+    monkeypatch.setenv('NUMBA_CACHE_DIR', str(tmp_path))   # (the tool sets a default)
+    tool = load_tool('self_contact_ab')
+    rng = np.random.default_rng(0)
+
+    class Calls(list):
+        name = 'fake.pkl'
+
+    calls = Calls([[rng.normal(size=(3, 4, 4)), np.zeros((3, 4, 4)), np.zeros((3, 4, 4)),
+                    0.004] for _ in range(3)])
+    before = [c[0].copy() for c in calls]
+    best, digests = tool.compare([_fake_kernel(1.0), _fake_kernel(1.0)], calls, 2)
+    assert best.shape == (2, 3) and np.isfinite(best).all() and digests[0] == digests[1]
+    best, digests = tool.compare([_fake_kernel(1.0), _fake_kernel(2.0)], calls, 2)
+    assert digests[0] != digests[1]
+    assert all(np.array_equal(c[0], b) for c, b in zip(calls, before))
+
+
+def test_the_ab_tool_loads_a_file_under_a_name_of_its_path(monkeypatch, tmp_path):
+    """
+    ``load`` returns the file's ``self_contact``, its module named from the file's path.
+
+    The same path gives the same name each time (numba's cache names the module that
+    wrote it), another path another name.
+    """
+    monkeypatch.setenv('NUMBA_CACHE_DIR', str(tmp_path))
+    tool = load_tool('self_contact_ab')
+    paths = []
+    for folder in ('a', 'b'):
+        os.mkdir(tmp_path / folder)
+        paths.append(tmp_path / folder / 'self_contact.py')
+        paths[-1].write_text(f'def self_contact(*arguments):\n    return "{folder}"\n')
+    kernels = [tool.load(str(p)) for p in paths + paths[:1]]
+    assert [k() for k in kernels] == ['a', 'b', 'a']
+    names = [k.__module__ for k in kernels]
+    expected = 'self_contact_' + hashlib.sha1(str(paths[0]).encode()).hexdigest()[:12]
+    assert names[0] == names[2] == expected and names[1] != names[0]
