@@ -1487,6 +1487,29 @@ def _detect(x0, x1, rows, cols, thickness, substeps, dirty, fresh, fresh_blocks,
     # (rows and columns once, not an integer division each time a patch is tested)
     order_i, order_j = order // pc, order % pc
     angles = _cone_angles(cones)
+    return _sweep(x0, x1, rows, cols, thickness, substeps, dirty, fresh, fresh_blocks, pairs,
+                  sides, edge_pairs, edge_sides, boxes, ends, cones, subs, ready, crease,
+                  crease_ready, crease_cosine, order, order_i, order_j, angles, box_a, box_b,
+                  shift, b_boxes, near, counts, tri_boxes, tri_ready, work, kept, edge_boxes,
+                  seg_boxes, seg_ends, seg_count, gaps, chosen, creased, normals)
+
+
+@numba.njit(**BORROW)
+def _sweep(x0, x1, rows, cols, thickness, substeps, dirty, fresh, fresh_blocks, pairs, sides,
+           edge_pairs, edge_sides, boxes, ends, cones, subs, ready, crease, crease_ready,
+           crease_cosine, order, order_i, order_j, angles, box_a, box_b, shift, b_boxes,
+           near, counts, tri_boxes, tri_ready, work, kept, edge_boxes, seg_boxes, seg_ends,
+           seg_count, gaps, chosen, creased, normals):
+    """
+    Run :func:`_detect`'s sweep over the pairs of patches; return its two pair counts.
+
+    Apart from the arrays :func:`_detect` allocates (``order``, ``order_i``, ``order_j``:
+    the patches by their boxes' low x, and their rows and columns; ``angles``:
+    :func:`_cone_angles`; the rest scratch space), so that it only borrows them: compiled
+    without reference counting, the views it takes of the patches' rows of ``ends`` and
+    the arrays it hands to each pair's tests are not counted.
+    """
+    pr, pc = boxes.shape[0], boxes.shape[1]
     count = edge_count = 0
     for m in range(pr * pc):
         a = order[m]
@@ -2286,9 +2309,24 @@ def _resolve_passes(x0, x1, qd, dv, inv_mass, support, cols, pairs, sides, kept,
     (time counted in pushes: ``stamps`` when a vertex last moved, ``checked`` when a pair
     was found apart). Most pairs are apart after the first pass.
     """
-    pushes = 0
     stamps = np.zeros(fresh.shape[0], dtype=np.int64)
     checked = np.full(kept, -1, dtype=np.int64)     # pushes when found apart
+    _passes(x0, x1, qd, dv, inv_mass, support, cols, pairs, sides, kept, target, friction, h,
+            one_side, fresh, edge_pairs, edge_sides, edges_kept, up, carried, stamps,
+            checked)
+
+
+@numba.njit(**BORROW)
+def _passes(x0, x1, qd, dv, inv_mass, support, cols, pairs, sides, kept, target, friction, h,
+            one_side, fresh, edge_pairs, edge_sides, edges_kept, up, carried, stamps,
+            checked):
+    """
+    Run :func:`_resolve_passes`' passes on its arrays (``stamps`` zero, ``checked`` -1).
+
+    Apart from the arrays it allocates, so that it only borrows them (compiled without
+    reference counting, as :func:`_sweep`).
+    """
+    pushes = 0
     for _ in range(RESOLVE_PASSES):
         for e in range(kept):
             p, t = pairs[e, 0], pairs[e, 1]
