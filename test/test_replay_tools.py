@@ -1,6 +1,7 @@
 """The self-contact kernel's replay tools: ``tools/self_contact_replay.py`` and ``_ab.py``."""
 
 import hashlib
+import importlib
 import os
 
 from conftest import load_tool
@@ -26,7 +27,7 @@ def test_replayed_calls_do_what_the_captured_ones_did():
     assert digest == captured and seconds.shape == (len(calls),)
     assert tool.replay(calls, 1, chained=True)[1] == captured
     # the calls found pairs: contact work, not only empty checks
-    kernel = tool.importlib.import_module('hcloth_ros.core.kernels.self_contact')
+    kernel = importlib.import_module('hcloth_ros.core.kernels.self_contact')
     assert sum(kernel.self_contact(*tool.fresh(a))[0] for _, a in calls) > 0
 
 

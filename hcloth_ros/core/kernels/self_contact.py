@@ -549,11 +549,21 @@ def _below(nx, ny, nz, ax, ay, az, low):
 @numba.njit(**BORROW)
 def _overlap(a, b):
     # one branch: where about one test in five passes (the edge and point tests' boxes),
-    # a branch per comparison mispredicted often. The largest of the six differences
-    # (exact in floating point: a - b <= 0 where a <= b), as ``&`` of the comparisons
-    # was compiled back into a branch each in the edge loop (3-4 % of a replayed call)
-    return max(max(max(a[0] - b[3], b[0] - a[3]), max(a[1] - b[4], b[1] - a[4])),
-               max(a[2] - b[5], b[2] - a[5])) <= 0.0
+    # a branch per comparison mispredicted often (see _box_gap)
+    return _box_gap(a, b[0], b[1], b[2], b[3], b[4], b[5]) <= 0.0
+
+
+@numba.njit(**BORROW_INLINE)
+def _box_gap(a, b0, b1, b2, b3, b4, b5):
+    """
+    Return the largest gap between box ``a`` and box ``b*`` (min xyz, max xyz): > 0, apart.
+
+    The largest of the six differences, exact in floating point (``a - b <= 0`` where
+    ``a <= b``): ``&`` of the six comparisons was compiled back into a branch each in the
+    edge loop (3-4 % of a replayed call).
+    """
+    return max(max(max(a[0] - b3, b0 - a[3]), max(a[1] - b4, b1 - a[4])),
+               max(a[2] - b5, b2 - a[5]))
 
 
 @numba.njit(**BORROW)
@@ -1202,9 +1212,8 @@ def _edge_against(x0, x1, rows, cols, thickness, substeps, subs, shift, e, r, c,
         # box mispredicted often (with _overlap's change, 6-7 % of a replayed call)
         sb = seg_boxes[m]
         for q in range(seg_count[m]):
-            gaps[q] = max(max(max(box[0] - sb[3, q], sb[0, q] - box[3]),
-                              max(box[1] - sb[4, q], sb[1, q] - box[4])),
-                          max(box[2] - sb[5, q], sb[2, q] - box[5]))
+            gaps[q] = _box_gap(box, sb[0, q], sb[1, q], sb[2, q], sb[3, q], sb[4, q],
+                               sb[5, q])
         met = 0
         for q in range(seg_count[m]):
             chosen[met] = q
