@@ -61,7 +61,7 @@ def client_messages(t, starts, far_y, turn=True):
     return out
 
 
-def run(seed, turn=True, overrides=None, shed=None, restore=None, costs=None):
+def run(seed, turn=True, overrides=None, shed=None, restore=None, costs=None, prepare=None):
     """
     Fold once with the timing drawn from ``seed``; return the grids before and after.
 
@@ -70,12 +70,16 @@ def run(seed, turn=True, overrides=None, shed=None, restore=None, costs=None):
     ``costs``: a list that gets, for each tick after the first (which compiles or loads
     the kernels), self-contact's time on the finest level (its kernel calls and
     ``carry``, ms), the pairs its first check found and the whole tick's time (ms).
+    ``prepare``: called with the simulation before the first tick (the replay tool wraps
+    its kernels and its ticks there to capture calls).
     """
     rng = np.random.default_rng(seed)
     values = params.load_file(params.config_path('fold.yaml'))
     values.update(overrides or {})
     values = params.resolve(values)
     sim = Simulation.build(values)
+    if prepare is not None:
+        prepare(sim)
     k = sim.solver.levels()[-1]
     kernel = [0.0]
     if costs is not None:

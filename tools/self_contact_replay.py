@@ -2,9 +2,14 @@
 Self-contact's kernel calls of the folded drop captured, then replayed alone: time and result.
 
     .venv/bin/python tools/self_contact_replay.py [--size 129] [--steps 61:100] \
-        [--repeats 3] [--save FILE | --load FILE] [--edges creases|sharp|all] [--chained]
+        [--scene folded|fold] [--repeats 3] [--save FILE | --load FILE] \
+        [--edges creases|sharp|all] [--chained]
 
-Runs the contact bench's folded drop (``multigrid``, thickness 4 mm, one numba thread),
+Runs the contact bench's folded drop (``multigrid``, thickness 4 mm, one numba thread;
+``--scene fold``: the fold demo's scene instead, ``tools/fold_jitter.py``'s seed 0 with
+``--size`` its finest side, its ticks as the steps: at 129 x 129, ticks 300-329 hold the
+layers lying on each other after the fold, each tick a first call finding 700-1,000 pairs
+and a second after strain limiting),
 keeps a copy of every argument of each finest-level kernel call in the steps asked for
 (numbered from 1, both ends included; steps 61-100 at 129 x 129: the layers slide over
 each other as the fold opens, every call finding pairs or checking the points strain
@@ -40,21 +45,75 @@ import numba
 import numpy as np
 
 
-def capture(size, first, last):
+def capture(size, first, last, scene='folded'):
     """
     Return the finest level's kernel calls in steps first..last and their results' digest.
 
     ``[(step, arguments)]``, each argument copied before the call (the kernel writes to
     them), and the digest of what those calls wrote and returned as they ran (as
     :func:`replay` makes it): a replay that gives the same digest did the same work.
+    ``scene``: ``'folded'``, the contact bench's folded drop; ``'fold'``, the fold demo's
+    scene (see :func:`_capture_fold`).
     """
+    if scene == 'fold':
+        return _capture_fold(size, first, last)
     from hcloth_ros.bench.self_contact import scene_setup
     from hcloth_ros.core import make_solver
     model, state, control = scene_setup(size, 'folded')
     solver = make_solver('multigrid', model, thickness=0.004)
-    finest = model.level_count - 1
-    kit = solver.kernels(finest)
     calls, now, digest = [], [0], hashlib.sha1()
+    _capturing(solver, first, last, calls, now, digest)
+    for step in range(1, last + 1):
+        now[0] = step
+        solver.step(state, control, 1 / 60)
+        _progress(step, last, calls)
+    print()
+    return calls, digest.hexdigest()[:12]
+
+
+def _capture_fold(size, first, last):
+    """
+    :func:`capture` on the fold demo's scene, its ticks numbered from 1.
+
+    ``tools/fold_jitter.py``'s run of seed 0 (the demo's client path and timing, through
+    the node's gripper logic), the scene's own solver (``hierarchical``) with ``size`` its
+    finest side (33 x 33 and its levels up to 65 x 65, the demo's; 129 x 129, issue 10's
+    16k points): the layers lie on each other from about tick 180 to the end (479).
+    """
+    import os
+    import sys
+    sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+    import fold_jitter  # noqa: I100 (next to this tool)
+    levels = {33: 1, 65: 2, 129: 3, 257: 4}.get(size)
+    if levels is None:
+        raise SystemExit(f'the fold scene runs at 33, 65, 129 or 257, not {size}')
+    calls, now, digest = [], [0], hashlib.sha1()
+
+    def prepare(sim):
+        _capturing(sim.solver, first, last, calls, now, digest)
+        advance = sim.advance
+
+        def counted():
+            now[0] += 1
+            report = advance()
+            _progress(now[0], last, calls)
+            return report
+        sim.advance = counted
+
+    fold_jitter.run(0, overrides={'cloth.levels': levels}, prepare=prepare)
+    print()
+    return calls, digest.hexdigest()[:12]
+
+
+def _capturing(solver, first, last, calls, now, digest):
+    """
+    Wrap the solver's finest-level kernels: keep the calls made in steps first..last.
+
+    ``now[0]``: the step under way (the caller's); ``calls`` gets ``(step, arguments)``
+    copied before each kept call, and ``digest`` what those calls wrote and returned.
+    """
+    finest = solver.levels()[-1]
+    kit = solver.kernels(finest)
 
     def kept(*arguments):
         if not first <= now[0] <= last:
@@ -70,12 +129,12 @@ def capture(size, first, last):
             return kept if name == 'self_contact' else getattr(kit, name)
 
     solver._kits[finest] = Capturing()
-    for step in range(1, last + 1):
-        now[0] = step
-        solver.step(state, control, 1 / 60)
+
+
+def _progress(step, last, calls):
+    """Show how far a capture has come."""
+    if step <= last:
         print(f'\rstep {step} of {last}, {len(calls)} calls kept', end='', flush=True)
-    print()
-    return calls, digest.hexdigest()[:12]
 
 
 # Where a call's arguments hold the patch cache (boxes .. the triangles points lie on) and
@@ -139,8 +198,11 @@ def per_step(calls, seconds, which):
     """Sum ``seconds`` by step over the calls ``which`` selects (first or later calls)."""
     totals = {}
     for (step, arguments), t in zip(calls, seconds):
-        later = arguments[-2]       # the kernel's reuse flag (before the crease angle): set on a
-        # step's later calls
+        # the kernel's reuse flag (before the crease angle): not 0 on a step's later calls
+        # (until 2026-12-01, session 42, compared as it was: its value 2, the later calls
+        # whose paths start where the call before left the level clean, counted in neither
+        # part, and the later calls' line was missing)
+        later = arguments[-2] != 0
         if which is None or which == later:
             totals[step] = totals.get(step, 0.0) + t
     return np.array(list(totals.values()))
@@ -149,6 +211,8 @@ def per_step(calls, seconds, which):
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
     parser.add_argument('--size', type=int, default=129)
+    parser.add_argument('--scene', choices=('folded', 'fold'), default='folded',
+                        help="the contact bench's folded drop, or the fold demo's scene")
     parser.add_argument('--steps', default='61:100', help='first:last, from 1, both included')
     parser.add_argument('--repeats', type=int, default=3)
     store = parser.add_mutually_exclusive_group()
@@ -166,7 +230,7 @@ def main(argv=None):
         calls = [(step, crease_angle(arguments)) for step, arguments in calls]
     else:
         first, last = (int(v) for v in args.steps.split(':'))
-        calls, captured = capture(args.size, first, last)
+        calls, captured = capture(args.size, first, last, args.scene)
         print(f'digest of the calls as they ran: {captured}')
         if args.save:
             with open(args.save, 'wb') as f:
