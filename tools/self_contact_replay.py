@@ -82,7 +82,9 @@ def _capture_fold(size, first, last):
     """
     import os
     import sys
-    sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+    here = os.path.dirname(os.path.abspath(__file__))
+    if here not in sys.path:
+        sys.path.insert(0, here)
     import fold_jitter  # noqa: I100 (next to this tool)
     levels = {33: 1, 65: 2, 129: 3, 257: 4}.get(size)
     if levels is None:
@@ -198,10 +200,8 @@ def per_step(calls, seconds, which):
     """Sum ``seconds`` by step over the calls ``which`` selects (first or later calls)."""
     totals = {}
     for (step, arguments), t in zip(calls, seconds):
-        # the kernel's reuse flag (before the crease angle): not 0 on a step's later calls
-        # (until 2026-12-01, session 42, compared as it was: its value 2, the later calls
-        # whose paths start where the call before left the level clean, counted in neither
-        # part, and the later calls' line was missing)
+        # the kernel's reuse flag (before the crease angle): BOXES_KEPT or
+        # BOXES_KEPT_NEW_START (1 or 2) on a step's later calls, BOXES_NEW (0) on its first
         later = arguments[-2] != 0
         if which is None or which == later:
             totals[step] = totals.get(step, 0.0) + t
