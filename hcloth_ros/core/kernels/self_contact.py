@@ -75,7 +75,10 @@ off a triangle (its normal within 45 degrees of up) is noted as lying on it, fol
 from step to step across the grid's triangles, and pushed back up off it to ``1 + SLACK``
 thicknesses at the end of each step, friction included, as the detection would push
 that pair, but without detecting it: a layer at rest on another sank into it every step
-under gravity, every point of it a pair, and now lies still.
+under gravity, every point of it a pair, and now lies still. At each call's start a point
+noted as lying on a layer with no room left to its obstacle has none left either
+(:func:`_rest_on_layers`): a push from a layer above moves that layer alone, as on the
+ground, and does not press the one below into the one under it.
 
 A level restarted from the coarser one (:func:`settle`, once, before its first step) has
 no motion to tell which side of a triangle a point came from: a pair found near takes the
@@ -128,6 +131,9 @@ FLAT_HALF_ANGLE = math.acos(FLAT_COSINE)
 CREASE_ANGLE = math.radians(10.0)
 # Pairs are pushed this fraction beyond the thickness (see self_contact).
 SLACK = 0.05
+# Most passes of _rest_on_layers: one a layer of a stack (a cloth folded onto itself
+# lies in a few), at least.
+REST_PASSES = 32
 # Gauss-Seidel passes over the pairs of one detection.
 RESOLVE_PASSES = 4
 # Room to an obstacle (m) taken as none: the obstacle's pass leaves a point at its margin
@@ -2258,6 +2264,8 @@ def self_contact(
         raise ValueError('self_contact: the block cache does not fit the level')
     if reuse == BOXES_KEPT_NEW_START:
         _still_sweeps(boxes, ends, subs, subs_ready, stale, thickness)
+    # what rests on a layer that rests stays (see _rest_on_layers)
+    _rest_on_layers(x1, held_up, carried, inv_mass, rows, cols, thickness, up)
     first, dropped, clean = _rounds(x0, xs, x1, qdf, dvf, inv_mass, held_up, rows, cols,
                                     thickness, friction, iterations, h, substeps,
                                     crease_cosine, fresh, fresh_blocks, dirty, stale, touched,
@@ -2404,6 +2412,51 @@ def _faces(x, t, side, up, cols):
     nx, ny, nz = _triangle_normal(x, t, cols)
     along = (nx * up[0] + ny * up[1] + nz * up[2]) * (1.0 if side > 0.0 else -1.0)
     return along > UPWARD * math.sqrt(nx * nx + ny * ny + nz * nz)
+
+
+@numba.njit(**BORROW)
+def _rest_on_layers(x, support, carried, inv_mass, rows, cols, thickness, up):
+    """
+    Take the room of each free point lying on a layer that rests; return how many lost it.
+
+    The supports are taken anew before each call, so a point lying on a layer that lies
+    on the ground had room left to it, and a push from a layer above moved it down into
+    the layer it lay on, the layer below it resting: on the fold demo's sandwich (the
+    top layer's rolled border between the bottom layer and its own roll) each side's
+    pushes undid the other's, and a call took four detections. Here a free point above
+    an obstacle that faces up, noted in ``carried`` (:func:`carry`) and still lying on
+    that triangle (:func:`_track` at ``x``: on its noted side, the triangle facing up,
+    at most ``1 + SLACK`` thicknesses above it), all of whose vertices have no room left,
+    has none left either (``ROOM_TOLERANCE``): it rests as they do, and a push from
+    above moves what lies on it (:func:`_come_to_rest`, as a side pushed up off a
+    resting side rests). Passes until none changes, so that a stack rests from the
+    bottom up.
+    """
+    n = rows * cols
+    target = thickness * (1.0 + SLACK) * (1.0 + 1e-6)     # (pushed there, within rounding)
+    rested = 0
+    for _ in range(REST_PASSES):
+        changed = 0
+        for p in range(n):
+            code = carried[p]
+            if code < 0 or inv_mass[p] == 0.0 or support[3, p] <= ROOM_TOLERANCE:
+                continue
+            if support[0, p] * up[0] + support[1, p] * up[1] + \
+                    support[2, p] * up[2] <= UPWARD:
+                continue
+            side = 1.0 if code % 2 else -1.0
+            t, plane = _track(x, p, code // 2, rows, cols)
+            if t < 0 or not 0.0 < side * plane[0] <= target or \
+                    not _faces(x, t, side, up, cols):
+                continue
+            i, j, k = _triangle(t, cols)
+            if max(support[3, i], max(support[3, j], support[3, k])) <= ROOM_TOLERANCE:
+                support[3, p] = 0.0
+                changed += 1
+        rested += changed
+        if changed == 0:
+            break
+    return rested
 
 
 @numba.njit(**JIT)
