@@ -75,10 +75,11 @@ off a triangle (its normal within 45 degrees of up) is noted as lying on it, fol
 from step to step across the grid's triangles, and pushed back up off it to ``1 + SLACK``
 thicknesses at the end of each step, friction included, as the detection would push
 that pair, but without detecting it: a layer at rest on another sank into it every step
-under gravity, every point of it a pair, and now lies still. Before a call's first pushes
-a point noted as lying on a layer with no room left to its obstacle has none left either
-(:func:`_rest_on_layers`): a push from a layer above moves that layer alone, as on the
-ground, and does not press the one below into the one under it.
+under gravity, every point of it a pair, and now lies still. A point noted as lying on a
+layer with no room left to its obstacle has none left either (:func:`_rests`, asked
+before the pushes of each pair it is in, of the positions at the call's first pushes): a
+push from a layer above moves that layer alone, as on the ground, and does not press the
+one below into the one under it.
 
 A level restarted from the coarser one (:func:`settle`, once, before its first step) has
 no motion to tell which side of a triangle a point came from: a pair found near takes the
@@ -131,9 +132,6 @@ FLAT_HALF_ANGLE = math.acos(FLAT_COSINE)
 CREASE_ANGLE = math.radians(10.0)
 # Pairs are pushed this fraction beyond the thickness (see self_contact).
 SLACK = 0.05
-# Most passes of _rest_on_layers: one a layer of a stack (a cloth folded onto itself
-# lies in a few), at least.
-REST_PASSES = 32
 # Gauss-Seidel passes over the pairs of one detection.
 RESOLVE_PASSES = 4
 # Room to an obstacle (m) taken as none: the obstacle's pass leaves a point at its margin
@@ -2298,6 +2296,10 @@ def _rounds(x0, xs, x1, qd, dv, inv_mass, support, rows, cols, thickness, fricti
     edge_pairs = np.empty((edge_capacity, 2), dtype=np.int64)
     edge_sides = np.empty(edge_capacity)
     first, dropped, clean = -1, 0, False
+    # (what _rests keeps, made at the first pushes)
+    x_rest, lay = np.empty((3, 0)), np.empty(0, dtype=np.int64)
+    no_room = np.empty(0, dtype=np.bool_)
+    asked, lies_on, stack = np.empty(0, dtype=np.int8), lay, lay
     # pairs are pushed a little further than detection looks: one pushed to exactly the
     # thickness would be found again by rounding, and every round would run
     target = thickness * (1.0 + SLACK)
@@ -2319,11 +2321,17 @@ def _rounds(x0, xs, x1, qd, dv, inv_mass, support, rows, cols, thickness, fricti
         if found + edges_found == 0:
             clean = True
             break
-        if attempt == 0 and not surface:
-            # what rests on a layer that rests stays (see _rest_on_layers); the pushes
-            # alone read the room, so a call that finds nothing needs none of it (the
-            # fold demo's later calls: a fifth of their time)
-            _rest_on_layers(x1, support, carried, inv_mass, rows, cols, thickness, up)
+        if not surface:
+            # what rests on a layer that rests stays (see _rests), as of the first
+            # pushes: the pushes alone read the room, so a call that finds nothing needs
+            # none of it (the fold demo's later calls: a fifth of their time)
+            if attempt == 0:
+                x_rest, lay = x1.copy(), carried.copy()
+                no_room = support[3] <= ROOM_TOLERANCE
+                asked = np.zeros(n, dtype=np.int8)
+                lies_on, stack = np.empty(n, dtype=np.int64), np.empty(n, dtype=np.int64)
+            _rest_pairs(pairs, kept, edge_pairs, edges_kept, x_rest, no_room, lay, inv_mass,
+                        support, rows, cols, thickness, up, asked, lies_on, stack)
         # the last round moves points alone: Gauss-Seidel over a cluster of pairs that
         # share vertices converges slowly (a fast fold left 1-3 of 300 pairs crossed
         # after 16 rounds)
@@ -2417,50 +2425,105 @@ def _faces(x, t, side, up, cols):
     return along > UPWARD * math.sqrt(nx * nx + ny * ny + nz * nz)
 
 
-@numba.njit(**BORROW)
-def _rest_on_layers(x, support, carried, inv_mass, rows, cols, thickness, up):
-    """
-    Take the room of each free point lying on a layer that rests; return how many lost it.
+# What _rests knows of a point: not yet asked, being asked (on its stack), rests, not
+UNASKED, ASKING, RESTS, MOVES = 0, 1, 2, 3
 
-    The supports are taken anew before each call, so a point lying on a layer that lies
-    on the ground had room left to it, and a push from a layer above moved it down into
-    the layer it lay on, the layer below it resting: on the fold demo's sandwich (the
-    top layer's rolled border between the bottom layer and its own roll) each side's
-    pushes undid the other's, and a call took four detections. Here a free point above
-    an obstacle that faces up, noted in ``carried`` (:func:`carry`) and still lying on
-    that triangle (:func:`_track` at ``x``: on its noted side, the triangle facing up,
-    at most ``1 + SLACK`` thicknesses above it), all of whose vertices have no room left,
-    has none left either (``ROOM_TOLERANCE``): it rests as they do, and a push from
-    above moves what lies on it (:func:`_come_to_rest`, as a side pushed up off a
-    resting side rests). Passes until none changes, so that a stack rests from the
-    bottom up. Run after a call's first detection, and only if it found pairs: the
-    detection does not read the room, and the positions are still the call's own.
+
+@numba.njit(**BORROW)
+def _lying_on(x, p, no_room, carried, inv_mass, support, rows, cols, thickness, up):
     """
-    n = rows * cols
+    Return the triangle free point p lies on, if resting there may take its room, or -1.
+
+    p has room left (not in ``no_room``) above an obstacle that faces up, is noted in
+    ``carried`` (:func:`carry`) and still lies on that triangle (:func:`_track` at ``x``:
+    on its noted side, the triangle facing up, at most ``1 + SLACK`` thicknesses above
+    it).
+    """
+    code = carried[p]
+    if code < 0 or inv_mass[p] == 0.0 or no_room[p]:
+        return -1
+    if support[0, p] * up[0] + support[1, p] * up[1] + support[2, p] * up[2] <= UPWARD:
+        return -1
+    side = 1.0 if code % 2 else -1.0
+    t, plane = _track(x, p, code // 2, rows, cols)
     target = thickness * (1.0 + SLACK) * (1.0 + 1e-6)     # (pushed there, within rounding)
-    rested = 0
-    for _ in range(REST_PASSES):
-        changed = 0
-        for p in range(n):
-            code = carried[p]
-            if code < 0 or inv_mass[p] == 0.0 or support[3, p] <= ROOM_TOLERANCE:
+    if t < 0 or not 0.0 < side * plane[0] <= target or not _faces(x, t, side, up, cols):
+        return -1
+    return t
+
+
+@numba.njit(**BORROW)
+def _rests(v, x, no_room, carried, inv_mass, support, rows, cols, thickness, up, asked,
+           lies_on, stack):
+    """
+    Settle whether point v rests on a layer that rests; if it does, take its room.
+
+    A free point lying on a triangle (:func:`_lying_on`, at the call's first pushes:
+    ``x``, ``no_room`` and ``carried`` as they were then) all of whose vertices have no
+    room left or rest in turn, rests: it has no room left either (``support``), and a push
+    from above moves what lies on it (:func:`_come_to_rest`, as a side pushed up off a
+    resting side rests). The supports are taken anew before each call, so a point lying
+    on a layer that lies on the ground had room left to it, and a push from a layer above
+    moved it down into the layer it lay on: on the fold demo's sandwich (the top layer's
+    rolled border between the bottom layer and its own roll) each side's pushes undid the
+    other's, and a call took four detections.
+
+    Asked for the pairs' vertices before their pushes (:func:`_rounds`): only the pushes
+    read the room, and asking for every noted point (7,700 on the fold demo at 129 x 129,
+    where a call pushes about 450) was 7 % of the kernel's time there. Depth first down
+    the stack of layers (``asked``, ``lies_on`` and ``stack``: a point's state, triangle
+    and the points being asked); points lying on each other in a ring do not rest (none
+    of them can rest before the others), as passes over every point until none changed
+    found.
+    """
+    if asked[v] != UNASKED:
+        return
+    top = 0
+    stack[0] = v
+    while top >= 0:
+        p = stack[top]
+        if asked[p] == UNASKED:
+            t = _lying_on(x, p, no_room, carried, inv_mass, support, rows, cols, thickness,
+                          up)
+            if t < 0:
+                asked[p] = MOVES
+                top -= 1
                 continue
-            if support[0, p] * up[0] + support[1, p] * up[1] + \
-                    support[2, p] * up[2] <= UPWARD:
+            asked[p] = ASKING
+            lies_on[p] = t
+        i, j, k = _triangle(lies_on[p], cols)
+        verdict = RESTS
+        for w in (i, j, k):
+            if no_room[w] or asked[w] == RESTS:
                 continue
-            side = 1.0 if code % 2 else -1.0
-            t, plane = _track(x, p, code // 2, rows, cols)
-            if t < 0 or not 0.0 < side * plane[0] <= target or \
-                    not _faces(x, t, side, up, cols):
-                continue
-            i, j, k = _triangle(t, cols)
-            if max(support[3, i], max(support[3, j], support[3, k])) <= ROOM_TOLERANCE:
-                support[3, p] = 0.0
-                changed += 1
-        rested += changed
-        if changed == 0:
+            verdict = ASKING if asked[w] == UNASKED else MOVES
+            if verdict == ASKING:
+                top += 1
+                stack[top] = w
             break
-    return rested
+        if verdict == ASKING:
+            continue
+        asked[p] = verdict
+        if verdict == RESTS:
+            support[3, p] = 0.0
+        top -= 1
+
+
+@numba.njit(**BORROW)
+def _rest_pairs(pairs, kept, edge_pairs, edges_kept, x, no_room, carried, inv_mass, support,
+                rows, cols, thickness, up, asked, lies_on, stack):
+    """Settle, for every vertex of the pairs to be pushed, whether it rests (:func:`_rests`)."""
+    for e in range(kept):
+        i, j, k = _triangle(pairs[e, 1], cols)
+        for v in (pairs[e, 0], i, j, k):
+            _rests(v, x, no_room, carried, inv_mass, support, rows, cols, thickness, up, asked,
+                   lies_on, stack)
+    for e in range(edges_kept):
+        a, b = _edge(edge_pairs[e, 0], cols)
+        c, d = _edge(edge_pairs[e, 1], cols)
+        for v in (a, b, c, d):
+            _rests(v, x, no_room, carried, inv_mass, support, rows, cols, thickness, up, asked,
+                   lies_on, stack)
 
 
 @numba.njit(**JIT)
