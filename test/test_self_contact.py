@@ -1142,6 +1142,50 @@ def test_a_steps_later_calls_start_their_paths_where_a_clean_call_ended():
     assert from_clean >= 10, from_clean      # 20 of the 30 steps' later calls
 
 
+@pytest.mark.parametrize('clean', [False, True])
+def test_the_call_after_one_whose_rounds_ran_out_tests_round_its_unchecked_pushes(clean):
+    """
+    A step's later call (the obstacles' rounds') also tests what a call left unchecked.
+
+    A call whose rounds run out pushes points in its last round without detecting again.
+    The kernel replaced by one that moves a point and reports its rounds run out (or, with
+    ``clean``, a last detection that found nothing): a step's first ``apply`` calls it
+    ``ROUNDS`` times; the step's next ``apply``, given no moved point, still calls it,
+    asked first to test round that point alone. After a clean call nothing is asked.
+    """
+    from hcloth_ros.core.self_contact import ROUNDS
+    model = folded_model()
+    state = folded_state(model, 0.1)
+    solver = make_solver('multigrid', model, thickness=THICKNESS)
+    control = Control(model)
+    solver.step(state, control, H)      # (the step buffers apply works in)
+    levels = solver.levels()
+    finest = levels[-1]
+    kit, asked = solver.kernels(finest), []
+
+    def pushed(q, *arguments):
+        asked.append(arguments[6].copy())       # the points to test round
+        q[2, 3, 4] += 1e-4
+        return 1, 2, 0, clean
+
+    class Pushing:
+
+        def __getattr__(self, name):
+            return pushed if name == 'self_contact' else getattr(kit, name)
+
+    solver._kits[finest] = Pushing()
+    contact, holds = solver.self_contact, control.holds(finest)
+    contact.apply(solver, levels, state, holds, H)
+    assert len(asked) == (1 if clean else ROUNDS) and asked[0].all()
+    moved = np.zeros(asked[0].shape, dtype=bool)
+    later = contact.apply(solver, levels, state, holds, H, moved)
+    if clean:
+        assert later == 0 and len(asked) == 1
+    else:
+        assert len(asked) == 2 * ROUNDS     # (its rounds run out too)
+        assert asked[ROUNDS][3, 4] and asked[ROUNDS].sum() == 1
+
+
 def test_fast_fold_does_not_tunnel():
     """
     The top layer moves at 3 m/s into the bottom one, 5 cm a step over a 2 cm gap.
