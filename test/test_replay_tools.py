@@ -103,3 +103,44 @@ def test_the_ab_tool_loads_a_file_under_a_name_of_its_path(monkeypatch, tmp_path
     names = [k.__module__ for k in kernels]
     expected = 'self_contact_' + hashlib.sha1(str(paths[0]).encode()).hexdigest()[:12]
     assert names[0] == names[2] == expected and names[1] != names[0]
+
+
+def test_the_profile_tool_names_the_kernels_compiled_functions(tmp_path):
+    """
+    ``tools/self_contact_profile.py``: perf's map of freshly compiled code, and its report.
+
+    A function compiled here (not from a cache) is found in its dispatcher's LLVM module:
+    the map's line for it starts at its entry and names it as numba mangles it, which the
+    tool shortens to the function's own name. A report's compiled-code lines are summed
+    by function, as shares of those lines' samples.
+    """
+    import numba
+    tool = load_tool('self_contact_profile')
+
+    def twice_the_sum(values):
+        total = 0.0
+        for v in values:
+            total += v
+        return 2.0 * total
+
+    kernel = numba.njit(cache=False)(twice_the_sum)
+    assert kernel(np.arange(4.0)) == 12.0
+    symbols = tool.jit_symbols(kernel)
+    entry = kernel.overloads[kernel.signatures[0]].library.get_pointer_to_function(
+        kernel.overloads[kernel.signatures[0]].fndesc.llvm_func_name)
+    assert entry in symbols and tool.short_name(symbols[entry]) == 'twice_the_sum'
+    path = tmp_path / 'perf.map'
+    tool.write_map(symbols, path)
+    lines = {int(line.split()[0], 16): line.split() for line in open(path)}
+    assert lines[entry][2] == symbols[entry] and int(lines[entry][1], 16) > 0
+    report = [
+        '# Overhead  Shared Object  Symbol',
+        '    30.00%  [JIT] tid 7  [.] _ZN10hcloth_ros4core7kernels12self_contact6_sweepB4v1E',
+        '    10.00%  [JIT] tid 7  [.] _ZN10hcloth_ros4core7kernels12self_contact6_sweepB4v2E',
+        '    20.00%  [JIT] tid 7  [.] _ZN10hcloth_ros4core7kernels12self_contact5_nearB4v3E',
+        '    40.00%  libpython3.11.so.1.0  [.] _PyEval_EvalFrameDefault',
+    ]
+    rows, compiled = tool.shares(report)
+    assert compiled == 60.0
+    assert [(round(share, 6), name) for share, name in rows] == [
+        (round(200.0 / 3.0, 6), '_sweep'), (round(100.0 / 3.0, 6), '_near')]
