@@ -134,13 +134,14 @@ def test_the_profile_tool_names_the_kernels_compiled_functions(tmp_path):
     lines = {int(line.split()[0], 16): line.split() for line in open(path)}
     assert lines[entry][2] == symbols[entry] and int(lines[entry][1], 16) > 0
     report = [
+        '# Samples: 2K of event \'cpu-clock:pppH\'',
         '# Overhead  Shared Object  Symbol',
         '    30.00%  [JIT] tid 7  [.] _ZN10hcloth_ros4core7kernels12self_contact6_sweepB4v1E',
         '    10.00%  [JIT] tid 7  [.] _ZN10hcloth_ros4core7kernels12self_contact6_sweepB4v2E',
         '    20.00%  [JIT] tid 7  [.] _ZN10hcloth_ros4core7kernels12self_contact5_nearB4v3E',
         '    40.00%  libpython3.11.so.1.0  [.] _PyEval_EvalFrameDefault',
     ]
-    rows, compiled = tool.shares(report)
-    assert compiled == 60.0
+    rows, compiled, samples = tool.shares(report)
+    assert compiled == 60.0 and samples == 2000
     assert [(round(share, 6), name) for share, name in rows] == [
         (round(200.0 / 3.0, 6), '_sweep'), (round(100.0 / 3.0, 6), '_near')]

@@ -12,8 +12,9 @@ carries no symbols and this llvmlite registers none with perf, so the child comp
 kernel itself (numba's cache pointed at an empty directory: a minute or two) and writes
 perf's map of the compiled functions (``/tmp/perf-PID.map``) from the kernel's LLVM
 module before it exits. Prints each kernel function's share of the samples taken in
-compiled code (a function LLVM inlined counts in its caller) and that code's share of
-all samples (the rest: loading the capture, compiling, copying each call's arguments).
+compiled code (a function LLVM inlined counts in its caller), and its samples, and that
+code's share of all samples (the rest: loading the capture, compiling, copying each
+call's arguments).
 Run it with ``PYTHONPATH`` at another tree to profile that tree's kernel.
 """
 
@@ -78,13 +79,20 @@ def short_name(symbol):
 
 def shares(report_lines):
     """
-    Return ``([(share, function)], compiled)`` from ``perf report --sort dso,sym`` lines.
+    Return ``([(share, function)], compiled, samples)`` from ``perf report`` lines.
 
     ``share``: the function's part of the samples in compiled code (percent, most
-    first); ``compiled``: that code's part of all samples (percent).
+    first); ``compiled``: that code's part of all samples (percent); ``samples``: all
+    samples (the report's ``# Samples:`` line, 0 without one), so that two runs of the
+    same calls compare in samples (two versions of the kernel: the samples a function
+    lost or gained).
     """
-    by_name, compiled = {}, 0.0
+    by_name, compiled, samples = {}, 0.0, 0
     for line in report_lines:
+        if line.startswith('# Samples:'):
+            count = line.split()[2]
+            scale = {'K': 1e3, 'M': 1e6}.get(count[-1], 1.0)
+            samples = int(round(float(count.rstrip('KM')) * scale))
         if line.startswith('#') or '%' not in line or '[JIT]' not in line:
             continue
         percent = float(line.split('%')[0])
@@ -92,7 +100,7 @@ def shares(report_lines):
         by_name[name] = by_name.get(name, 0.0) + percent
         compiled += percent
     rows = sorted(((100.0 * p / compiled, name) for name, p in by_name.items()), reverse=True)
-    return rows, compiled
+    return rows, compiled, samples
 
 
 def child(capture, which, repeats):
@@ -147,11 +155,12 @@ def main(argv=None):
         report = subprocess.run(['perf', 'report', '-i', data, '--no-children', '--sort',
                                  'dso,sym', '--stdio'], check=True, capture_output=True,
                                 text=True).stdout
-    rows, compiled = shares(report.splitlines())
+    rows, compiled, samples = shares(report.splitlines())
+    in_code = compiled * samples / 100.0
     print(f'{args.calls} calls of {args.capture}, {args.repeats} times: compiled code '
-          f'{compiled:.1f} % of all samples; of its samples:')
+          f'{compiled:.1f} % of all {samples} samples ({in_code:.0f}); of its samples:')
     for share, name in rows[:args.top]:
-        print(f'  {share:5.1f} %  {name}')
+        print(f'  {share:5.1f} %  {share * in_code / 100.0:8.0f}  {name}')
 
 
 if __name__ == '__main__':
