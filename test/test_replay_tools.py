@@ -134,7 +134,7 @@ def test_the_profile_tool_names_the_kernels_compiled_functions(tmp_path):
     lines = {int(line.split()[0], 16): line.split() for line in open(path)}
     assert lines[entry][2] == symbols[entry] and int(lines[entry][1], 16) > 0
     report = [
-        '# Samples: 2K of event \'cpu-clock:pppH\'',
+        "# Samples: 2K of event 'cpu-clock:pppH'",
         '# Overhead  Shared Object  Symbol',
         '    30.00%  [JIT] tid 7  [.] _ZN10hcloth_ros4core7kernels12self_contact6_sweepB4v1E',
         '    10.00%  [JIT] tid 7  [.] _ZN10hcloth_ros4core7kernels12self_contact6_sweepB4v2E',
