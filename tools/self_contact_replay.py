@@ -196,14 +196,21 @@ def crease_angle(arguments):
     return list(arguments[:-1]) + [float(last)]
 
 
+def later_call(arguments):
+    """
+    Whether a captured call is one of its step's later calls, not its first.
+
+    By the kernel's reuse flag: BOXES_KEPT or BOXES_KEPT_NEW_START (1 or 2) on a step's
+    later calls, BOXES_NEW (0) on its first.
+    """
+    return arguments[REUSE] != 0
+
+
 def per_step(calls, seconds, which):
     """Sum ``seconds`` by step over the calls ``which`` selects (first or later calls)."""
     totals = {}
     for (step, arguments), t in zip(calls, seconds):
-        # the kernel's reuse flag (before the crease angle): BOXES_KEPT or
-        # BOXES_KEPT_NEW_START (1 or 2) on a step's later calls, BOXES_NEW (0) on its first
-        later = arguments[-2] != 0
-        if which is None or which == later:
+        if which is None or which == later_call(arguments):
             totals[step] = totals.get(step, 0.0) + t
     return np.array(list(totals.values()))
 
