@@ -1530,10 +1530,12 @@ def _detect(x0, x1, rows, cols, thickness, substeps, dirty, fresh, fresh_blocks,
     order = np.argsort(lows)
     # (rows and columns once, not an integer division each time a patch is tested)
     order_i, order_j = order // pc, order % pc
+    ranked, next_dirty = _ranked(boxes, dirty, order_i, order_j)
     angles = _cone_angles(cones)
     return _sweep(x0, x1, rows, cols, thickness, substeps, dirty, fresh, fresh_blocks, pairs,
                   sides, edge_pairs, edge_sides, boxes, ends, cones, subs, ready, crease,
-                  crease_ready, crease_cosine, order, order_i, order_j, angles, box_a, box_b,
+                  crease_ready, crease_cosine, order, order_i, order_j, ranked, next_dirty,
+                  angles, box_a, box_b,
                   shift, b_boxes, near, counts, tri_boxes, tri_ready, work, kept, kept_boxes,
                   kept_fresh, kept_gaps, edge_boxes, seg_boxes, seg_ends, seg_count, gaps,
                   chosen, creased, normals)
@@ -1542,30 +1544,41 @@ def _detect(x0, x1, rows, cols, thickness, substeps, dirty, fresh, fresh_blocks,
 @numba.njit(**BORROW)
 def _sweep(x0, x1, rows, cols, thickness, substeps, dirty, fresh, fresh_blocks, pairs, sides,
            edge_pairs, edge_sides, boxes, ends, cones, subs, ready, crease, crease_ready,
-           crease_cosine, order, order_i, order_j, angles, box_a, box_b, shift, b_boxes,
+           crease_cosine, order, order_i, order_j, ranked, next_dirty, angles, box_a, box_b,
+           shift, b_boxes,
            near, counts, tri_boxes, tri_ready, work, kept, kept_boxes, kept_fresh, kept_gaps,
            edge_boxes, seg_boxes, seg_ends, seg_count, gaps, chosen, creased, normals):
     """
     Run :func:`_detect`'s sweep over the pairs of patches; return its two pair counts.
 
     Apart from the arrays :func:`_detect` allocates (``order``, ``order_i``, ``order_j``:
-    the patches by their boxes' low x, and their rows and columns; ``angles``:
+    the patches by their boxes' low x, and their rows and columns; ``ranked`` and
+    ``next_dirty``: see :func:`_ranked`; ``angles``:
     :func:`_cone_angles`; the rest scratch space), so that it only borrows them: compiled
     without reference counting, the views it takes of the patches' rows of ``ends`` and
     the arrays it hands to each pair's tests are not counted.
     """
     pr, pc = boxes.shape[0], boxes.shape[1]
+    total = pr * pc
     count = edge_count = 0
-    for m in range(pr * pc):
+    for m in range(total):
         a = order[m]
         ai, aj = order_i[m], order_j[m]
-        for m2 in range(m, pr * pc):
-            b = order[m2]
-            bi, bj = order_i[m2], order_j[m2]
-            if boxes[bi, bj, 0] > boxes[ai, aj, 3]:
-                break
-            if not (dirty[ai, aj] or dirty[bi, bj]):
+        # a clean patch is tested against the dirty ones alone: the clean ones between
+        # are stepped over (a later call with a few patches dirty went through all of
+        # the 5,600 pairs of patches the sweep meets on the folded drop's sliding layers)
+        a_dirty = dirty[ai, aj]
+        m2 = m if a_dirty else next_dirty[m]
+        while m2 < total and ranked[m2, 0] <= ranked[m, 3]:
+            k = m2
+            m2 = m2 + 1 if a_dirty else next_dirty[m2 + 1]
+            # the boxes along y and z first, from the sweep's copy in its order (of those
+            # 5,600 pairs, 1,200 meet along all three axes)
+            if ranked[k, 1] > ranked[m, 4] or ranked[m, 1] > ranked[k, 4] or \
+                    ranked[k, 2] > ranked[m, 5] or ranked[m, 2] > ranked[k, 5]:
                 continue
+            b = order[k]
+            bi, bj = order_i[k], order_j[k]
             if not _pair_needed(boxes, cones, angles, ai, aj, bi, bj):
                 continue
             # again in the frame of the two patches' mean motion
@@ -1623,6 +1636,26 @@ def _sweep(x0, x1, rows, cols, thickness, substeps, dirty, fresh, fresh_blocks, 
                 if a == b:
                     break
     return count, edge_count
+
+
+@numba.njit(**JIT)
+def _ranked(boxes, dirty, order_i, order_j):
+    """
+    Return the patches' boxes in the sweep's order, and where the next dirty patch lies.
+
+    ``ranked[m] = boxes[order_i[m], order_j[m]]`` (read in turn by the sweep, not
+    gathered a pair at a time); ``next_dirty[m]``: the first place from ``m`` on whose
+    patch is marked in ``dirty`` (``len(order_i)`` past the last; one more place holds it).
+    """
+    total = order_i.shape[0]
+    ranked = np.empty((total, 6))
+    next_dirty = np.empty(total + 1, dtype=np.int64)
+    next_dirty[total] = total
+    for m in range(total - 1, -1, -1):
+        for d in range(6):
+            ranked[m, d] = boxes[order_i[m], order_j[m], d]
+        next_dirty[m] = m if dirty[order_i[m], order_j[m]] else next_dirty[m + 1]
+    return ranked, next_dirty
 
 
 @numba.njit(**BORROW)
@@ -1741,6 +1774,24 @@ def _longest_move(x0, x1, ta, tb, shift):
         ez = x1[2, i] - x0[2, i] - shift[2]
         longest = max(longest, ex * ex + ey * ey + ez * ez)
     return abs(tb - ta) * math.sqrt(longest)
+
+
+@numba.njit(**BORROW)
+def _longest_move_of(x0, x1, points, shift):
+    """
+    :func:`_longest_move` over the step where only ``points`` move (the others stay put).
+
+    A point that stays moves by ``-shift`` in the shifted frame.
+    """
+    longest = 0.0
+    if points.shape[0] < x0.shape[1]:
+        longest = shift[0] * shift[0] + shift[1] * shift[1] + shift[2] * shift[2]
+    for p in points:
+        ex = x1[0, p] - x0[0, p] - shift[0]
+        ey = x1[1, p] - x0[1, p] - shift[1]
+        ez = x1[2, p] - x0[2, p] - shift[2]
+        longest = max(longest, ex * ex + ey * ey + ez * ez)
+    return math.sqrt(longest)
 
 
 @numba.njit(**BORROW)
@@ -2217,14 +2268,21 @@ def self_contact(
         return 0, 0, 0, True
     x1, x0, xs = q.reshape((3, n)), q_from.reshape((3, n)), q_prev.reshape((3, n))
     qdf, dvf, held_up = qd.reshape((3, n)), dv.reshape((3, n)), support.reshape((4, n))
-    inv_mass = _inverse_masses(mass, hold_kind)
     # the mean displacement; sub-intervals so that no point moves more than half the
     # longest edge relative to it in one
-    shift = _mean_move(x0, x1)
+    if reuse == BOXES_KEPT_NEW_START:
+        # the points not marked start where they end (as _still_sweeps takes them): the
+        # moved ones' sums alone, the same numbers (a later call's two passes over the
+        # level were a third of its time on the folded drop's sliding layers)
+        moving = np.flatnonzero(moved)
+        shift = _mean_move_of(x0, x1, moving)
+        longest = _longest_move_of(x0, x1, moving, shift)
+    else:
+        shift = _mean_move(x0, x1)
+        longest = _longest_move(x0, x1, 0.0, 1.0, shift)
     if reuse == BOXES_NEW:
         start_edge[0] = _longest_edge(x0, rows, cols)
         crease_ready[:, :, 0] = False
-    longest = _longest_move(x0, x1, 0.0, 1.0, shift)
     # (the mean of the end positions' moves is finite only if all of them are)
     if not (math.isfinite(longest) and math.isfinite(shift[0] + shift[1] + shift[2])):
         return 0, 0, 0, False   # a blown-up step: the solver's check refuses it
@@ -2262,7 +2320,7 @@ def self_contact(
         raise ValueError('self_contact: the block cache does not fit the level')
     if reuse == BOXES_KEPT_NEW_START:
         _still_sweeps(boxes, ends, subs, subs_ready, stale, thickness)
-    first, dropped, clean = _rounds(x0, xs, x1, qdf, dvf, inv_mass, held_up, rows, cols,
+    first, dropped, clean = _rounds(x0, xs, x1, qdf, dvf, mass, hold_kind, held_up, rows, cols,
                                     thickness, friction, iterations, h, substeps,
                                     crease_cosine, fresh, fresh_blocks, dirty, stale, touched,
                                     boxes, ends, cones, subs, subs_ready, crease, crease_ready,
@@ -2271,9 +2329,9 @@ def self_contact(
 
 
 @numba.njit(**JIT)
-def _rounds(x0, xs, x1, qd, dv, inv_mass, support, rows, cols, thickness, friction, iterations,
-            h, substeps, crease_cosine, fresh, fresh_blocks, dirty, stale, touched, boxes,
-            ends, cones, subs, subs_ready, crease, crease_ready, up, carried, surface):
+def _rounds(x0, xs, x1, qd, dv, mass, hold_kind, support, rows, cols, thickness, friction,
+            iterations, h, substeps, crease_cosine, fresh, fresh_blocks, dirty, stale, touched,
+            boxes, ends, cones, subs, subs_ready, crease, crease_ready, up, carried, surface):
     """
     Run rounds of detection and response (:func:`self_contact`); return (first, dropped, clean).
 
@@ -2281,8 +2339,9 @@ def _rounds(x0, xs, x1, qd, dv, inv_mass, support, rows, cols, thickness, fricti
     is within the thickness of a triangle at ``x1`` and none crossed one on the way there.
 
     The paths detected run from ``x0`` to ``x1``; the pushes' friction takes the sliding
-    since ``xs`` (the step's start). ``fresh``, ``fresh_blocks``, ``dirty``: what the first
-    detection tests round;
+    since ``xs`` (the step's start); their weights, the points' inverse masses, come from
+    ``mass`` and ``hold_kind`` (made at the first pushes: most calls find nothing).
+    ``fresh``, ``fresh_blocks``, ``dirty``: what the first detection tests round;
     ``stale``: the patches whose boxes are out of date; ``touched`` gains the patches the
     rounds moved points of. ``surface`` (:func:`settle`): ``x0`` is ``x1`` (the creases at
     the start move with the points) and a near pair takes the side the point's own
@@ -2300,6 +2359,7 @@ def _rounds(x0, xs, x1, qd, dv, inv_mass, support, rows, cols, thickness, fricti
     x_rest, lay = np.empty((3, 0)), np.empty(0, dtype=np.int64)
     no_room = np.empty(0, dtype=np.bool_)
     asked, lies_on, stack = np.empty(0, dtype=np.int8), lay, lay
+    inv_mass = np.empty(0)
     # pairs are pushed a little further than detection looks: one pushed to exactly the
     # thickness would be found again by rounding, and every round would run
     target = thickness * (1.0 + SLACK)
@@ -2321,6 +2381,8 @@ def _rounds(x0, xs, x1, qd, dv, inv_mass, support, rows, cols, thickness, fricti
         if found + edges_found == 0:
             clean = True
             break
+        if attempt == 0:
+            inv_mass = _inverse_masses(mass, hold_kind)
         if not surface:
             # what rests on a layer that rests stays (see _rests), as of the first
             # pushes: the pushes alone read the room, so a call that finds nothing needs
@@ -2798,7 +2860,6 @@ def settle(q, mass, hold_kind, support, thickness, iterations, boxes, ends, cone
     x = q.reshape((3, n))
     if not np.all(np.isfinite(x)):
         return 0
-    inv_mass = _inverse_masses(mass, hold_kind)
     qd, dv = np.zeros((3, n)), np.zeros((3, n))   # pushes move positions alone
     subs_ready[:, :] = False
     crease_ready[:, :, :] = False
@@ -2809,7 +2870,7 @@ def settle(q, mass, hold_kind, support, thickness, iterations, boxes, ends, cone
     fresh_blocks = _fresh_blocks(fresh, rows, cols)
     dirty = np.zeros(((rows - 2) // PATCH + 1, (cols - 2) // PATCH + 1), dtype=np.bool_)
     _dirty_patches(fresh_blocks, dirty)
-    first = _rounds(x, x, x, qd, dv, inv_mass, support.reshape((4, n)), rows, cols,
+    first = _rounds(x, x, x, qd, dv, mass, hold_kind, support.reshape((4, n)), rows, cols,
                     thickness, 0.0, iterations, 1.0, MIN_SUBSTEPS, crease_cosine, fresh,
                     fresh_blocks, dirty, dirty.copy(), touched, boxes, ends, cones, subs,
                     subs_ready, crease, crease_ready, np.zeros(3), carried, True)[0]
@@ -2848,6 +2909,18 @@ def _mean_move(x0, x1):
         sx += x1[0, i] - x0[0, i]
         sy += x1[1, i] - x0[1, i]
         sz += x1[2, i] - x0[2, i]
+    n = x0.shape[1]
+    return np.array([sx / n, sy / n, sz / n])
+
+
+@numba.njit(**JIT)
+def _mean_move_of(x0, x1, points):
+    """:func:`_mean_move` where only ``points`` (ascending) move: its sums, less their zeros."""
+    sx = sy = sz = 0.0
+    for p in points:
+        sx += x1[0, p] - x0[0, p]
+        sy += x1[1, p] - x0[1, p]
+        sz += x1[2, p] - x0[2, p]
     n = x0.shape[1]
     return np.array([sx / n, sy / n, sz / n])
 
