@@ -23,12 +23,13 @@ def test_replayed_calls_do_what_the_captured_ones_did():
     tool = load_tool('self_contact_replay')
     calls, captured = tool.capture(33, 15, 30)
     assert len({step for step, _ in calls}) == 16 and len(calls) > 16
-    seconds, digest = tool.replay(calls, 1)
-    assert digest == captured and seconds.shape == (len(calls),)
+    seconds, digest, found = tool.replay(calls, 1)
+    assert digest == captured and seconds.shape == found.shape == (len(calls),)
     assert tool.replay(calls, 1, chained=True)[1] == captured
-    # the calls found pairs: contact work, not only empty checks
+    # the calls found pairs (contact work, not only empty checks), as the replay says
     kernel = importlib.import_module('hcloth_ros.core.kernels.self_contact')
-    assert sum(kernel.self_contact(*tool.fresh(a))[0] for _, a in calls) > 0
+    assert list(found) == [kernel.self_contact(*tool.fresh(a))[0] for _, a in calls]
+    assert found.sum() > 0
 
 
 def test_the_fold_scene_is_captured_as_it_ran():
@@ -48,6 +49,30 @@ def test_the_fold_scene_is_captured_as_it_ran():
     firsts = [a for _, a in calls if a[tool.REUSE] == 0]
     assert len(firsts) == 16 and len(calls) > 16
     assert all(kernel.self_contact(*tool.fresh(a))[0] > 0 for a in firsts)
+
+
+def test_the_replay_tells_the_steps_in_contact_and_each_steps_calls():
+    """
+    A step is in contact if its first call found pairs; its later calls' time counts too.
+
+    Made-up calls (only their step and reuse flag are read): step 1 finds nothing, step 2
+    finds 5 pairs at its first call and none at its later one, step 3 finds 2.
+    """
+    tool = load_tool('self_contact_replay')
+
+    def call(step, later):
+        arguments = [None] * (tool.REUSE + 1)
+        arguments[tool.REUSE] = 2 if later else 0
+        return step, arguments
+
+    calls = [call(1, False), call(1, True), call(2, False), call(2, True), call(3, False)]
+    seconds = np.array([1e-3, 2e-3, 3e-3, 4e-3, 5e-3])
+    found = np.array([0, 0, 5, 0, 2])
+    assert list(tool.steps_in_contact(calls, seconds, found)) == [7e-3, 5e-3]
+    assert tool.step_lines(calls, seconds, found) == [
+        '  step 1: first 1.00 ms (0 pairs), later 2.00 ms (0 pairs)',
+        '  step 2: first 3.00 ms (5 pairs), later 4.00 ms (0 pairs)',
+        '  step 3: first 5.00 ms (2 pairs)']
 
 
 def _fake_kernel(scale):

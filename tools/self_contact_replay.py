@@ -3,7 +3,7 @@ Self-contact's kernel calls of the folded drop captured, then replayed alone: ti
 
     .venv/bin/python tools/self_contact_replay.py [--size 129] [--steps 61:100] \
         [--scene folded|fold] [--repeats 3] [--save FILE | --load FILE] \
-        [--edges creases|sharp|all] [--chained]
+        [--edges creases|sharp|all] [--chained] [--per-step]
 
 Runs the contact bench's folded drop (``multigrid``, thickness 4 mm, one numba thread;
 ``--scene fold``: the fold demo's scene instead, ``tools/fold_jitter.py``'s seed 0 with
@@ -16,8 +16,10 @@ each other as the fold opens, every call finding pairs or checking the points st
 limiting moved), then runs each call again ``--repeats`` times on fresh copies and keeps
 its fastest. Prints the time of the
 calls in all, the median and mean of a step's calls, the same for the steps' first calls
-and for their later ones, and a digest of what the calls wrote (positions, velocities,
-velocity changes) and returned (pair counts, sub-intervals, pairs dropped, whether it
+and for their later ones and for the steps whose first call found pairs (as the contact
+bench's figure "in contact" takes them; ``--per-step``: each step's calls, their times
+and the pairs each found, too), and a digest of what the calls wrote (positions,
+velocities, velocity changes) and returned (pair counts, sub-intervals, pairs dropped, whether it
 ended clean; until 2026-11-30, session 38, the digest held only what they wrote): a change
 to the kernel that gives the same digest gave the same result on every call. A capture
 also prints the digest of the calls as they ran, which the replay's matches. Each call
@@ -147,14 +149,16 @@ REUSE = 25
 
 def replay(calls, repeats, chained=False):
     """
-    Run each call ``repeats`` times; return its fastest times and the results' digest.
+    Run each call ``repeats`` times; return its fastest times, the results' digest and pairs.
+
+    The pairs: what each call returned first (the pairs its first detection found).
 
     ``chained``: a call that may keep its step's cache (not a step's first) takes the one
     the replay of the call before it left.
     """
     kernel = importlib.import_module('hcloth_ros.core.kernels.self_contact').self_contact
     digest = hashlib.sha1()
-    best, left = [], None
+    best, found, left = [], [], None
     for _, arguments in calls:
         times = []
         if chained and left is not None and arguments[REUSE]:
@@ -166,9 +170,10 @@ def replay(calls, repeats, chained=False):
             result = kernel(*copies)
             times.append(time.perf_counter() - start)
         best.append(min(times))
+        found.append(int(result[0]))
         left = copies[CACHE]
         add_to_digest(digest, copies, result)
-    return np.array(best), digest.hexdigest()[:12]
+    return np.array(best), digest.hexdigest()[:12], np.array(found)
 
 
 def fresh(arguments):
@@ -215,6 +220,26 @@ def per_step(calls, seconds, which):
     return np.array(list(totals.values()))
 
 
+def steps_in_contact(calls, seconds, found):
+    """Return the summed time of each step whose first call found pairs ("in contact")."""
+    firsts = {step for (step, arguments), pairs in zip(calls, found)
+              if not later_call(arguments) and pairs > 0}
+    totals = {}
+    for (step, _), t in zip(calls, seconds):
+        if step in firsts:
+            totals[step] = totals.get(step, 0.0) + t
+    return np.array(list(totals.values()))
+
+
+def step_lines(calls, seconds, found):
+    """Return a line a step: its calls' times (ms), first call first, and the pairs each found."""
+    steps = {}
+    for (step, arguments), t, pairs in zip(calls, seconds, found):
+        steps.setdefault(step, []).append(f"{'later' if later_call(arguments) else 'first'} "
+                                          f'{1e3 * t:.2f} ms ({pairs} pairs)')
+    return [f'  step {step}: ' + ', '.join(parts) for step, parts in steps.items()]
+
+
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
     parser.add_argument('--size', type=int, default=129)
@@ -229,6 +254,8 @@ def main(argv=None):
                         help="replay with this self-contact edges setting's crease angle")
     parser.add_argument('--chained', action='store_true',
                         help="give a step's later calls the cache the call before left")
+    parser.add_argument('--per-step', action='store_true',
+                        help="print each step's calls, their times and pairs")
     args = parser.parse_args(argv)
     numba.set_num_threads(1)
     if args.load:
@@ -249,15 +276,21 @@ def main(argv=None):
         calls = [(step, arguments[:-1] + [CREASE_ANGLES[args.edges]])
                  for step, arguments in calls]
     replay(calls[:1], 1)        # compiled or loaded before the timing
-    seconds, digest = replay(calls, args.repeats, args.chained)
+    seconds, digest, found = replay(calls, args.repeats, args.chained)
     print(f'{len(calls)} calls in {len(per_step(calls, seconds, None))} steps, '
           f'{1e3 * seconds.sum():.1f} ms in all (fastest of {args.repeats} each); '
           f'digest {digest}')
+    if args.per_step:
+        print('\n'.join(step_lines(calls, seconds, found)))
     for label, which in (('all calls', None), ('first calls', False), ('later calls', True)):
         totals = 1e3 * per_step(calls, seconds, which)
         if len(totals):
             print(f'  {label}: a step median {np.median(totals):.2f} ms, '
                   f'mean {totals.mean():.2f} ms')
+    touching = 1e3 * steps_in_contact(calls, seconds, found)
+    if len(touching):
+        print(f'  {len(touching)} steps whose first call found pairs: a step median '
+              f'{np.median(touching):.2f} ms, mean {touching.mean():.2f} ms')
 
 
 if __name__ == '__main__':
