@@ -19,9 +19,10 @@ calls in all, the median and mean of a step's calls, the same for the steps' fir
 and for their later ones and for the steps whose first call found pairs (as the contact
 bench's figure "in contact" takes them; ``--per-step``: each step's calls, their times
 and the pairs each found, too), and a digest of what the calls wrote (positions,
-velocities, velocity changes) and returned (pair counts, sub-intervals, pairs dropped, whether it
-ended clean; until 2026-11-30, session 38, the digest held only what they wrote): a change
-to the kernel that gives the same digest gave the same result on every call. A capture
+velocities, velocity changes) and returned (pair counts, sub-intervals, pairs dropped,
+whether it ended clean; until 2026-11-30, session 38, the digest held only what they
+wrote): a change to the kernel that gives the same digest gave the same result on every
+call. A capture
 also prints the digest of the calls as they ran, which the replay's matches. Each call
 starts from the cache (boxes, flags, what lies on what) its capture held, so the digest
 shows what one call does, not what it leaves to the next; ``--chained`` gives a step's
@@ -211,11 +212,16 @@ def later_call(arguments):
     return arguments[REUSE] != 0
 
 
-def per_step(calls, seconds, which):
-    """Sum ``seconds`` by step over the calls ``which`` selects (first or later calls)."""
+def per_step(calls, seconds, which, steps=None):
+    """
+    Sum ``seconds`` by step over the calls ``which`` selects (first or later calls).
+
+    ``steps``: only those steps (None: all).
+    """
     totals = {}
     for (step, arguments), t in zip(calls, seconds):
-        if which is None or which == later_call(arguments):
+        if (which is None or which == later_call(arguments)) and \
+                (steps is None or step in steps):
             totals[step] = totals.get(step, 0.0) + t
     return np.array(list(totals.values()))
 
@@ -224,11 +230,7 @@ def steps_in_contact(calls, seconds, found):
     """Return the summed time of each step whose first call found pairs ("in contact")."""
     firsts = {step for (step, arguments), pairs in zip(calls, found)
               if not later_call(arguments) and pairs > 0}
-    totals = {}
-    for (step, _), t in zip(calls, seconds):
-        if step in firsts:
-            totals[step] = totals.get(step, 0.0) + t
-    return np.array(list(totals.values()))
+    return per_step(calls, seconds, None, firsts)
 
 
 def step_lines(calls, seconds, found):
