@@ -20,7 +20,7 @@ from hcloth_ros.core.kernels.self_contact import (_crease_cosine, _edge_side, _f
                                                   BOXES_NEW, carry, CREASE_ANGLE, FLAT_COSINE,
                                                   MAX_SUBSTEPS, MIN_SUBSTEPS, obstacle_supports,
                                                   ON_EDGE, PATCH, patch_cache, REACH,
-                                                  RESOLVE_PASSES, RING, SLACK, SUB)
+                                                  RESOLVE_PASSES, RING, scratch, SLACK, SUB)
 from hcloth_ros.core.recovery import step_with_retries
 import numpy as np
 import pytest
@@ -255,6 +255,50 @@ def _run_kernel(lv, start, end, qd, friction):
                                   THICKNESS, friction, 4, H, 10.0, UP,
                                   *patch_cache(*lv.shape), BOXES_NEW, CREASE_ANGLE)
     return dv, result
+
+
+def _spoilt(arrays):
+    """Fill scratch arrays with values no call would leave (NaN, -7, all True)."""
+    for a in arrays:
+        a[...] = np.nan if a.dtype.kind == 'f' else (True if a.dtype.kind == 'b' else -7)
+    return arrays
+
+
+def test_the_scratch_arrays_carry_nothing_from_one_call_to_the_next():
+    """
+    A call sets every scratch array it reads: spoilt ones give the same bits as new ones.
+
+    The scratch arrays (``Scratch``) are kept with the patch cache so that a call maps no
+    memory afresh; what one call leaves in them must not reach the next. The pressed
+    layers' call (pairs found and pushed: every array used), once with new arrays and
+    once with arrays full of NaN, -7 and True; and a scratch of another level's size is
+    refused before anything moves.
+    """
+    lv, start, end, qd, _ = _pressed_layers(approach=0.3)
+    outcomes = []
+    for spoil in (False, True):
+        cache = list(patch_cache(*lv.shape))
+        if spoil:
+            cache[9] = _spoilt(cache[9])
+        mine, velocity, dv = end.copy(), qd.copy(), np.zeros_like(end)
+        result = kernels.self_contact(mine, velocity, dv, start, start, lv.mass,
+                                      np.zeros(lv.shape, dtype=np.int8),
+                                      np.ones(lv.shape, dtype=np.bool_), _no_support(lv),
+                                      THICKNESS, 0.3, 4, H, 10.0, UP, *cache, BOXES_NEW,
+                                      CREASE_ANGLE)
+        outcomes.append((mine, velocity, dv, result))
+    assert outcomes[0][3][0] > 100
+    for a, b in zip(*outcomes):
+        assert np.array_equal(a, b)
+    cache = list(patch_cache(*lv.shape))
+    cache[9] = scratch(lv.shape[0] + 1, lv.shape[1])
+    mine = end.copy()
+    with pytest.raises(ValueError, match='scratch arrays do not fit'):
+        kernels.self_contact(mine, qd.copy(), np.zeros_like(end), start, start, lv.mass,
+                             np.zeros(lv.shape, dtype=np.int8),
+                             np.ones(lv.shape, dtype=np.bool_), _no_support(lv), THICKNESS,
+                             0.3, 4, H, 10.0, UP, *cache, BOXES_NEW, CREASE_ANGLE)
+    assert np.array_equal(mine, end)
 
 
 def test_kernel_pushes_near_points_apart_as_brute_force_sees():
@@ -810,7 +854,9 @@ def test_resolve_passes_skip_only_pairs_nothing_moved():
     for one_side in (False, True):
         _resolve_passes(x0, mine[0], mine[1], mine[2], inv_mass, mine[3], cols, pairs, sides,
                         len(pairs), THICKNESS, 0.3, H, one_side, mine[4],
-                        np.zeros((0, 2), dtype=np.int64), np.zeros(0), 0, UP, mine[5])
+                        np.zeros((0, 2), dtype=np.int64), np.zeros(0), 0, UP, mine[5],
+                        # scratch: whatever it holds is set before it is read
+                        np.full(n, 99, dtype=np.int64), np.full(len(pairs), 7, dtype=np.int64))
         pushes = 0
         for _ in range(RESOLVE_PASSES):
             for (p, t), side in zip(pairs, sides):
@@ -1440,6 +1486,8 @@ def test_the_calls_tool_runs_each_edges_setting_in_turn_and_charts_them(tmp_path
     assert out.count('edges sharp: kernel a step') == 2
     assert out.count('edges all: kernel a step') == 2
     assert out.count('steps whose first detection found pairs') == 4
+    assert out.count('page faults in the calls') == 4      # (and each call's, printed)
+    assert out.count(' page faults |') + out.count(' page faults;') >= 4
     assert chart.read_bytes()[:8] == b'\x89PNG\r\n\x1a\n'
     with pytest.raises(SystemExit):
         calls.main(['--size', '17', '--steps', '1', '--edges', 'sharp,blunt'])
@@ -1763,11 +1811,16 @@ def _layers_lying(ground, sink, slide=0.0):
     return lv, start, end, qd, support, notes, layer, margin
 
 
-def _carry(lv, start, end, qd, support, notes, friction=0.0):
-    """Run ``carry`` under gravity along -z on ``end``; return its count and dv."""
+def _carry(lv, start, end, qd, support, notes, friction=0.0, spoil=False):
+    """
+    Run ``carry`` under gravity along -z on ``end``; return its count and dv.
+
+    ``spoil``: with scratch arrays full of values no call leaves (:func:`_spoilt`).
+    """
     dv = np.zeros_like(end)
+    work = scratch(*lv.shape)
     count = carry(end, qd, dv, start, lv.mass, np.zeros(lv.shape, dtype=np.int8), support,
-                  notes, UP, THICKNESS, friction, H)
+                  notes, UP, THICKNESS, friction, H, _spoilt(work) if spoil else work)
     return count, dv
 
 
@@ -1788,8 +1841,13 @@ def test_a_layer_lying_on_one_on_the_ground_is_carried_where_it_lay():
     noted = notes >= 0
     assert noted.sum() > 0.3 * lv.rows * lv.cols
     assert violations(start, end, THICKNESS)[0] > noted.sum()
+    again = [a.copy() for a in (end, qd, support, notes)]
     count, _ = _carry(lv, start, end, qd, support, notes)
     assert count == noted.sum()
+    # (its scratch arrays carry nothing from an earlier call: spoilt ones, the same bits)
+    assert _carry(lv, start, *again, spoil=True)[0] == count
+    for a, b in zip((end, qd, support, notes), again):
+        assert np.array_equal(a, b)
     x0, x1, v = start.reshape(3, -1), end.reshape(3, -1), qd.reshape(3, -1)
     assert np.allclose(x1[:, noted], x0[:, noted], rtol=0.0, atol=1e-12)
     assert np.all(np.abs(v[:, noted]) < 1e-9)

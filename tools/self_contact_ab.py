@@ -42,7 +42,8 @@ import numba  # noqa: E402
 import numpy as np  # noqa: E402
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from self_contact_replay import add_to_digest, crease_angle, fresh  # noqa: E402 (next to this)
+from self_contact_replay import (add_to_digest, fitted, fresh,  # noqa: E402 (next to this)
+                                 takes_scratch)
 
 
 def load(path):
@@ -64,10 +65,11 @@ def compare(kernels, calls, repeats):
     """Return each version's fastest time a call (2, calls) and its results' digest."""
     best = np.full((2, len(calls)), np.inf)
     digests = [hashlib.sha1(), hashlib.sha1()]
+    scratch = [takes_scratch(kernel) for kernel in kernels]
     for round_ in range(repeats):
         for c, arguments in enumerate(calls):
             for v in ((0, 1) if (round_ + c) % 2 == 0 else (1, 0)):
-                copies = fresh(arguments)
+                copies = fresh(arguments, scratch[v])
                 start = time.perf_counter()
                 result = kernels[v](*copies)
                 best[v, c] = min(best[v, c], time.perf_counter() - start)
@@ -84,7 +86,7 @@ class Calls(list):
 
     def __init__(self, path):
         with open(path, 'rb') as f:
-            super().__init__(crease_angle(arguments) for _, arguments in pickle.load(f))
+            super().__init__(fitted(arguments) for _, arguments in pickle.load(f))
         self.name = path
 
 
@@ -102,7 +104,7 @@ def main(argv=None):
         if not calls:
             raise SystemExit(f'{path}: no calls')
         for kernel in kernels:      # compiled or loaded before the timing
-            kernel(*fresh(calls[0]))
+            kernel(*fresh(calls[0], takes_scratch(kernel)))
         best, digests = compare(kernels, calls, args.repeats)
         a, b = 1e3 * best.sum(axis=1)
         print(f'  A {a:.1f} ms, B {b:.1f} ms, B/A {b / a:.3f}; digests A {digests[0]}, '

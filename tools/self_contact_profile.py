@@ -108,10 +108,10 @@ def child(capture, which, repeats):
     import numba
     here = os.path.dirname(os.path.abspath(__file__))
     sys.path.insert(0, here)
-    from self_contact_replay import crease_angle, fresh, later_call  # noqa: I100 (beside)
+    from self_contact_replay import fitted, fresh, later_call  # noqa: I100 (beside)
     numba.set_num_threads(1)
     with open(capture, 'rb') as f:
-        calls = [crease_angle(arguments) for _, arguments in pickle.load(f)]
+        calls = [fitted(arguments) for _, arguments in pickle.load(f)]
     calls = [a for a in calls if which == 'all' or later_call(a) == (which == 'later')]
     if not calls:
         raise SystemExit(f'no {which} calls in {capture}')

@@ -31,8 +31,13 @@ the captured ones), so that what a call keeps for the next counts too. The steps
 is the same for every version of the kernel, where ``tools/self_contact_calls.py``
 follows each version's own motion (a different bit in a chaotic drop changes which steps
 are in contact, and so the medians). ``--save``
-writes the captured calls (about 3 MB a call at 129 x 129) for another version to
-``--load``: run the tool with ``PYTHONPATH`` pointing at each version's tree.
+writes the captured calls (about 3 MB a call at 129 x 129; the kernel's scratch arrays
+are not kept, and the replayed calls share one set a level size, as a solver's calls do)
+for another version to ``--load``: run the tool with ``PYTHONPATH`` pointing at each
+version's tree. The fastest of the repeats leaves out what a call pays only the first time
+it runs (until session 47 each call's scratch arrays were mapped afresh and faulted in,
+0.5 ms of a sliding call in the bench that the fastest replay did not show): the bench
+and ``tools/fold_jitter.py`` time calls as they run.
 ``--edges`` replays the calls with that setting's crease angle instead of the captured one
 (``core.self_contact.CREASE_ANGLES``): what the edge tests cost on the same work.
 """
@@ -40,6 +45,7 @@ writes the captured calls (about 3 MB a call at 129 x 129) for another version t
 import argparse
 import hashlib
 import importlib
+import inspect
 import math
 import pickle
 import time
@@ -123,7 +129,7 @@ def _capturing(solver, first, last, calls, now, digest):
     def kept(*arguments):
         if not first <= now[0] <= last:
             return kit.self_contact(*arguments)
-        calls.append((now[0], fresh(arguments)))
+        calls.append((now[0], kept_copy(arguments)))
         result = kit.self_contact(*arguments)
         add_to_digest(digest, arguments, result)
         return result
@@ -142,10 +148,13 @@ def _progress(step, last, calls):
         print(f'\rstep {step} of {last}, {len(calls)} calls kept', end='', flush=True)
 
 
-# Where a call's arguments hold the patch cache (boxes .. the triangles points lie on) and
-# the reuse flag that says which of it a call may keep (see kernels.self_contact)
-CACHE = slice(15, 25)
-REUSE = 25
+# Where a call's arguments hold the patch cache (boxes .. the triangles points lie on), in
+# it the scratch arrays (kernels.self_contact.Scratch: kept as None, made when a call
+# runs; calls captured before 2026-12-02, session 47, have none), and the reuse flag that
+# says which of the cache a call may keep (see kernels.self_contact)
+CACHE = slice(15, 26)
+SCRATCH = 24
+REUSE = 26
 
 
 def replay(calls, repeats, chained=False):
@@ -177,9 +186,43 @@ def replay(calls, repeats, chained=False):
     return np.array(best), digest.hexdigest()[:12], np.array(found)
 
 
-def fresh(arguments):
-    """Return a call's arguments with every array copied (the kernel writes to them)."""
-    return [a.copy() if isinstance(a, np.ndarray) else a for a in arguments]
+def fresh(arguments, scratch=True):
+    """
+    Return a call's arguments with every array copied (the kernel writes to them).
+
+    The scratch arrays (whose contents no call reads before it sets them) are one set per
+    level's shape, shared by every call as a solver's are; ``scratch`` False: none, for
+    a kernel from before they were kept (:func:`takes_scratch`).
+    """
+    copies = [a.copy() if isinstance(a, np.ndarray) else a for a in arguments]
+    if not scratch:
+        return copies[:SCRATCH] + copies[SCRATCH + 1:]
+    if copies[SCRATCH] is None:
+        copies[SCRATCH] = _scratch(copies[6].shape)
+    return copies
+
+
+_SCRATCH = {}
+
+
+def _scratch(shape):
+    """Return the scratch arrays of a level of ``shape`` (rows, cols), one set a shape."""
+    if shape not in _SCRATCH:
+        module = importlib.import_module('hcloth_ros.core.kernels.self_contact')
+        _SCRATCH[shape] = module.scratch(*shape)
+    return _SCRATCH[shape]
+
+
+def takes_scratch(kernel):
+    """Whether a version of the kernel takes the scratch arrays (session 47 on)."""
+    return 'scratch' in inspect.signature(getattr(kernel, 'py_func', kernel)).parameters
+
+
+def kept_copy(arguments):
+    """Return a call's arguments copied to be kept, its scratch arrays left out (None)."""
+    copies = [a.copy() if isinstance(a, np.ndarray) else a for a in arguments]
+    copies[SCRATCH] = None
+    return copies
 
 
 def add_to_digest(digest, copies, result):
@@ -189,17 +232,22 @@ def add_to_digest(digest, copies, result):
     digest.update(repr(tuple(int(v) for v in result)).encode())
 
 
-def crease_angle(arguments):
+def fitted(arguments):
     """
-    Return a captured call's arguments with the last one the kernel's crease angle.
+    Return a captured call's arguments as this tool's calls hold them.
 
-    Calls saved before 2026-11-30 end in ``all_edges`` (a bool): False, the creases of
-    then (pi: the thickness's bound alone), True every bent edge (0).
+    The last one the kernel's crease angle: calls saved before 2026-11-30 end in
+    ``all_edges`` (a bool): False, the creases of then (pi: the thickness's bound
+    alone), True every bent edge (0). A place for the scratch arrays (None), which
+    calls saved before 2026-12-02 lack.
     """
     last = arguments[-1]
     if isinstance(last, (bool, np.bool_)):
         last = 0.0 if last else math.pi
-    return list(arguments[:-1]) + [float(last)]
+    arguments = list(arguments[:-1]) + [float(last)]
+    if len(arguments) == REUSE + 1:
+        arguments.insert(SCRATCH, None)
+    return arguments
 
 
 def later_call(arguments):
@@ -263,7 +311,7 @@ def main(argv=None):
     if args.load:
         with open(args.load, 'rb') as f:
             calls = pickle.load(f)
-        calls = [(step, crease_angle(arguments)) for step, arguments in calls]
+        calls = [(step, fitted(arguments)) for step, arguments in calls]
     else:
         first, last = (int(v) for v in args.steps.split(':'))
         calls, captured = capture(args.size, first, last, args.scene)

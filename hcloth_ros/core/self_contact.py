@@ -313,7 +313,8 @@ class SelfContact:
         self._uncommitted = True
         supports(solver.model.scene, solver._q[k], support)
         count = carry(solver._q[k], solver._qd[k], solver._dv[k], state.q[k], lv.mass,
-                      holds.kind, support, lies_on, up, self.thickness, self.friction, h)
+                      holds.kind, support, lies_on, up, self.thickness, self.friction, h,
+                      self._patches[-2])
         solver._extra['self_contact_carried'] = count
         return count
 

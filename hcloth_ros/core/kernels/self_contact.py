@@ -86,6 +86,7 @@ no motion to tell which side of a triangle a point came from: a pair found near 
 side the point's own surface lies on, and is pushed apart as the detection's pairs are.
 """
 
+import collections
 import math
 
 from hcloth_ros.core.kernels.jit import BORROW, BORROW_INLINE, JIT
@@ -2246,10 +2247,10 @@ def self_contact(
         # blocks' boxes of those patches and whether
         # each patch has them; the longest edge at the start positions; the creases' flags
         # (bit 1: at the start positions, bit 2: at the end) and whether each patch has
-        # them at the start and at the end; the triangle each point was last pushed off
-        # (see carry and _resolve_passes)
+        # them at the start and at the end; the calls' scratch arrays; the triangle each
+        # point was last pushed off (see carry and _resolve_passes)
         boxes, ends, cones, touched, subs, subs_ready, start_edge, crease, crease_ready,
-        carried, reuse,
+        scratch, carried, reuse,
         # input: the most an edge may bend (rad) and not be a crease, tested against the
         # other patches' edges (:func:`_crease_cosine`; 0: every bent edge)
         crease_angle=CREASE_ANGLE):
@@ -2303,7 +2304,10 @@ def self_contact(
     crease_cosine = _crease_cosine(thickness, start_edge[0], crease_angle)
     # the first detection tests only round the points marked moved (the caller's: those
     # that moved since its last call's first detection)
-    fresh = moved.copy().reshape(n)
+    if scratch.fresh.shape[0] != n or scratch.pairs.shape[0] != PAIRS_PER_POINT * n:
+        raise ValueError('self_contact: the scratch arrays do not fit the level')
+    fresh = scratch.fresh
+    fresh[:] = moved.reshape(n)
     fresh_blocks = _fresh_blocks(fresh, rows, cols)
     dirty = np.zeros(((rows - 2) // PATCH + 1, (cols - 2) // PATCH + 1), dtype=np.bool_)
     _dirty_patches(fresh_blocks, dirty)
@@ -2325,14 +2329,15 @@ def self_contact(
                                     thickness, friction, iterations, h, substeps,
                                     crease_cosine, fresh, fresh_blocks, dirty, stale, touched,
                                     boxes, ends, cones, subs, subs_ready, crease, crease_ready,
-                                    up, carried, False)
+                                    scratch, up, carried, False)
     return first, substeps, dropped, clean
 
 
 @numba.njit(**JIT)
 def _rounds(x0, xs, x1, qd, dv, mass, hold_kind, support, rows, cols, thickness, friction,
             iterations, h, substeps, crease_cosine, fresh, fresh_blocks, dirty, stale, touched,
-            boxes, ends, cones, subs, subs_ready, crease, crease_ready, up, carried, surface):
+            boxes, ends, cones, subs, subs_ready, crease, crease_ready, scratch, up, carried,
+            surface):
     """
     Run rounds of detection and response (:func:`self_contact`); return (first, dropped, clean).
 
@@ -2348,19 +2353,12 @@ def _rounds(x0, xs, x1, qd, dv, mass, hold_kind, support, rows, cols, thickness,
     the start move with the points) and a near pair takes the side the point's own
     surface lies on (:func:`_surface_side`).
     """
-    n = rows * cols
-    pairs = np.empty((PAIRS_PER_POINT * n, 2), dtype=np.int64)
-    sides = np.empty(PAIRS_PER_POINT * n)
-    # free edges' pairs, and one a point for the creases'
-    edge_capacity = EDGE_PAIRS_PER_EDGE * 2 * (rows + cols) + n
-    edge_pairs = np.empty((edge_capacity, 2), dtype=np.int64)
-    edge_sides = np.empty(edge_capacity)
-    first, dropped, clean = -1, 0, False
+    pairs, sides = scratch.pairs, scratch.sides
+    edge_pairs, edge_sides = scratch.edge_pairs, scratch.edge_sides
     # (what _rests keeps, made at the first pushes)
-    x_rest, lay = np.empty((3, 0)), np.empty(0, dtype=np.int64)
-    no_room = np.empty(0, dtype=np.bool_)
-    asked, lies_on, stack = np.empty(0, dtype=np.int8), lay, lay
-    inv_mass = np.empty(0)
+    x_rest, lay, no_room, asked = scratch.x_rest, scratch.lay, scratch.no_room, scratch.asked
+    lies_on, stack, inv_mass = scratch.lies_on, scratch.stack, scratch.inv_mass
+    first, dropped, clean = -1, 0, False
     # pairs are pushed a little further than detection looks: one pushed to exactly the
     # thickness would be found again by rounding, and every round would run
     target = thickness * (1.0 + SLACK)
@@ -2383,16 +2381,17 @@ def _rounds(x0, xs, x1, qd, dv, mass, hold_kind, support, rows, cols, thickness,
             clean = True
             break
         if attempt == 0:
-            inv_mass = _inverse_masses(mass, hold_kind)
+            _inverse_masses(mass, hold_kind, inv_mass)
         if not surface:
             # what rests on a layer that rests stays (see _rests), as of the first
             # pushes: the pushes alone read the room, so a call that finds nothing needs
             # none of it (the fold demo's later calls: a fifth of their time)
             if attempt == 0:
-                x_rest, lay = x1.copy(), carried.copy()
-                no_room = support[3] <= ROOM_TOLERANCE
-                asked = np.zeros(n, dtype=np.int8)
-                lies_on, stack = np.empty(n, dtype=np.int64), np.empty(n, dtype=np.int64)
+                x_rest[:, :] = x1
+                lay[:] = carried
+                for v in range(no_room.shape[0]):
+                    no_room[v] = support[3, v] <= ROOM_TOLERANCE
+                asked[:] = 0
             _rest_pairs(pairs, kept, edge_pairs, edges_kept, x_rest, no_room, lay, inv_mass,
                         support, rows, cols, thickness, up, asked, lies_on, stack)
         # the last round moves points alone: Gauss-Seidel over a cluster of pairs that
@@ -2406,7 +2405,8 @@ def _rounds(x0, xs, x1, qd, dv, mass, hold_kind, support, rows, cols, thickness,
         fresh[:] = False
         _resolve_passes(xs, x1, qd, dv, inv_mass, support, cols, pairs, sides, kept,
                         target, friction, h, attempt == iterations, fresh, edge_pairs,
-                        edge_sides, edges_kept, up, carried)
+                        edge_sides, edges_kept, up, carried, scratch.stamps,
+                        scratch.checked)
         fresh_blocks = _fresh_blocks(fresh, rows, cols)
         _dirty_patches(fresh_blocks, dirty)
         stale[:, :] = dirty
@@ -2414,10 +2414,10 @@ def _rounds(x0, xs, x1, qd, dv, mass, hold_kind, support, rows, cols, thickness,
     return first, dropped, clean
 
 
-@numba.njit(**JIT)
+@numba.njit(**BORROW)
 def _resolve_passes(x0, x1, qd, dv, inv_mass, support, cols, pairs, sides, kept, target,
                     friction, h, one_side, fresh, edge_pairs, edge_sides, edges_kept,
-                    up, carried):
+                    up, carried, stamps, checked):
     """
     ``RESOLVE_PASSES`` Gauss-Seidel passes over the pairs; mark in ``fresh`` the points they move.
 
@@ -2430,26 +2430,14 @@ def _resolve_passes(x0, x1, qd, dv, inv_mass, support, cols, pairs, sides, kept,
 
     A pair found apart is not tested again until a push moves one of its vertices: the
     test would find it apart again and do nothing, so the result is the same bit for bit
-    (time counted in pushes: ``stamps`` when a vertex last moved, ``checked`` when a pair
-    was found apart). Most pairs are apart after the first pass.
+    (time counted in pushes: ``stamps`` (a point each) when a vertex last moved,
+    ``checked`` (at least ``kept``) when a pair was found apart; scratch, set here). Most
+    pairs are apart after the first pass.
     """
-    stamps = np.zeros(fresh.shape[0], dtype=np.int64)
-    checked = np.full(kept, -1, dtype=np.int64)     # pushes when found apart
-    _passes(x0, x1, qd, dv, inv_mass, support, cols, pairs, sides, kept, target, friction, h,
-            one_side, fresh, edge_pairs, edge_sides, edges_kept, up, carried, stamps,
-            checked)
-
-
-@numba.njit(**BORROW)
-def _passes(x0, x1, qd, dv, inv_mass, support, cols, pairs, sides, kept, target, friction, h,
-            one_side, fresh, edge_pairs, edge_sides, edges_kept, up, carried, stamps,
-            checked):
-    """
-    Run :func:`_resolve_passes`' passes on its arrays (``stamps`` zero, ``checked`` -1).
-
-    Apart from the arrays it allocates, so that it only borrows them (compiled without
-    reference counting, as :func:`_sweep`).
-    """
+    for v in range(stamps.shape[0]):
+        stamps[v] = 0
+    for e in range(kept):
+        checked[e] = -1
     pushes = 0
     for _ in range(RESOLVE_PASSES):
         for e in range(kept):
@@ -2589,15 +2577,13 @@ def _rest_pairs(pairs, kept, edge_pairs, edges_kept, x, no_room, carried, inv_ma
                    lies_on, stack)
 
 
-@numba.njit(**JIT)
-def _inverse_masses(mass, hold_kind):
-    """Return the points' inverse masses, flat (0 for held points)."""
+@numba.njit(**BORROW)
+def _inverse_masses(mass, hold_kind, inv_mass):
+    """Write the points' inverse masses into ``inv_mass``, flat (0 for held points)."""
     rows, cols = hold_kind.shape
-    inv_mass = np.empty(rows * cols)
     for r in range(rows):
         for c in range(cols):
             inv_mass[r * cols + c] = 0.0 if hold_kind[r, c] != FREE else 1.0 / mass[r, c]
-    return inv_mass
 
 
 @numba.njit(**BORROW)
@@ -2666,14 +2652,15 @@ def _track(x, p, t, rows, cols):
 
 @numba.njit(**JIT)
 def carry(q, qd, dv, q_prev, mass, hold_kind, support, carried, up, thickness, friction,
-          h):
+          h, scratch):
     """
     Keep the points lying on a layer on it, before the step's detection; return how many moved.
 
     ``q``, ``qd``, ``dv``: the level after the step (corrected in place), ``q_prev`` its
     start; ``support``: the obstacles below (see :func:`self_contact`); ``carried``: the
     triangle each point was last pushed up off (:func:`_resolve_passes`), updated here;
-    ``up``: the unit vector against gravity.
+    ``up``: the unit vector against gravity; ``scratch``: the patch cache's
+    (:func:`patch_cache`).
 
     A layer lying on another sinks into it every step (``g h^2`` from rest; the solvers
     do not know the layer below) and self-contact, finding it within the thickness,
@@ -2697,8 +2684,9 @@ def carry(q, qd, dv, q_prev, mass, hold_kind, support, carried, up, thickness, f
         return 0
     x1, x0 = q.reshape((3, n)), q_prev.reshape((3, n))
     qdf, dvf, held_up = qd.reshape((3, n)), dv.reshape((3, n)), support.reshape((4, n))
-    inv_mass = _inverse_masses(mass, hold_kind)
-    waiting = np.zeros(n, dtype=np.bool_)
+    inv_mass, waiting = scratch.inv_mass, scratch.waiting
+    _inverse_masses(mass, hold_kind, inv_mass)
+    waiting[:] = False
     return _carry_points(x0, x1, qdf, dvf, inv_mass, held_up, carried, up, thickness,
                          friction, h, rows, cols, waiting)
 
@@ -2709,7 +2697,7 @@ def _carry_points(x0, x1, qd, dv, inv_mass, support, carried, up, thickness, fri
     """
     Run :func:`carry` on its flat arrays (``waiting`` all False); return how many moved.
 
-    Apart from the arrays :func:`carry` allocates, so that it only borrows them (compiled
+    Apart from :func:`carry`'s views of its arrays, so that it only borrows them (compiled
     without reference counting, as :func:`_sweep`): counting the arrays handed to each
     point's tracking and push was half of the time of a carry (the fold demo's 7,700
     points lying on the layer below, 129 x 129).
@@ -2834,7 +2822,7 @@ def _surface_side(x, p, t, rows, cols):
 
 @numba.njit(**JIT)
 def settle(q, mass, hold_kind, support, thickness, iterations, boxes, ends, cones, touched,
-           subs, subs_ready, start_edge, crease, crease_ready, carried):
+           subs, subs_ready, start_edge, crease, crease_ready, scratch, carried):
     """
     Push a level restarted from the coarser one out of its own triangles; return the pairs found.
 
@@ -2867,14 +2855,15 @@ def settle(q, mass, hold_kind, support, thickness, iterations, boxes, ends, cone
     # no creases: they are tested for crossings alone, and nothing moves here (a bound
     # would cost a pass over the level for edge tests that cannot find a pair)
     crease_cosine = -1.0
-    fresh = np.ones(n, dtype=np.bool_)
+    fresh = scratch.fresh
+    fresh[:] = True
     fresh_blocks = _fresh_blocks(fresh, rows, cols)
     dirty = np.zeros(((rows - 2) // PATCH + 1, (cols - 2) // PATCH + 1), dtype=np.bool_)
     _dirty_patches(fresh_blocks, dirty)
     first = _rounds(x, x, x, qd, dv, mass, hold_kind, support.reshape((4, n)), rows, cols,
                     thickness, 0.0, iterations, 1.0, MIN_SUBSTEPS, crease_cosine, fresh,
                     fresh_blocks, dirty, dirty.copy(), touched, boxes, ends, cones, subs,
-                    subs_ready, crease, crease_ready, np.zeros(3), carried, True)[0]
+                    subs_ready, crease, crease_ready, scratch, np.zeros(3), carried, True)[0]
     touched[:, :] = True        # the boxes are the settled positions', not a step's
     return first
 
@@ -2885,8 +2874,8 @@ def patch_cache(rows, cols):
 
     The patch boxes, ends, cones and moved patches, the blocks' boxes and which patches
     have theirs, the longest edge at the start positions, the creases' flags and which
-    patches have theirs at the start and at the end positions, and the triangle each
-    point lies on (-1: none).
+    patches have theirs at the start and at the end positions, the calls' scratch arrays
+    (:class:`Scratch`) and the triangle each point lies on (-1: none).
     """
     pr, pc = (rows - 2) // PATCH + 1, (cols - 2) // PATCH + 1
     blocks = ((rows - 2) // SUB + 1, (cols - 2) // SUB + 1)
@@ -2894,7 +2883,36 @@ def patch_cache(rows, cols):
             np.zeros((pr, pc), dtype=np.bool_), np.empty(blocks + (12,)),
             np.zeros((pr, pc), dtype=np.bool_), np.zeros(1),
             np.zeros(3 * rows * cols, dtype=np.uint8), np.zeros((pr, pc, 2), dtype=np.bool_),
-            np.full(rows * cols, -1, dtype=np.int64))
+            scratch(rows, cols), np.full(rows * cols, -1, dtype=np.int64))
+
+
+# The arrays a call works in, whose contents it sets before it reads them (none carries
+# anything from one call to the next). Kept with the patch cache, not made a call: a
+# level's arrays made afresh were mapped afresh, and the first touch of each page faulted
+# (about 200 pages, 0.56 ms, of a sliding call's 2.2 ms on the folded drop at 129 x 129,
+# 2.8 us a fault on this machine's virtual memory: doc/self_contact_log.md, session 47).
+# The pairs found and their sides; the edge pairs and theirs; the positions, notes of
+# what lies on what, rooms used up, answers and stacks of :func:`_rests`; the inverse
+# masses; the pushes' time stamps (a point each) and the pairs' (a pair each); the points
+# a detection tests round; the points :func:`carry` has yet to bear.
+Scratch = collections.namedtuple('Scratch', (
+    'pairs', 'sides', 'edge_pairs', 'edge_sides', 'x_rest', 'lay', 'no_room', 'asked',
+    'lies_on', 'stack', 'inv_mass', 'stamps', 'checked', 'fresh', 'waiting'))
+
+
+def scratch(rows, cols):
+    """Return the :class:`Scratch` arrays of a level of ``rows`` x ``cols`` points."""
+    n = rows * cols
+    # free edges' pairs, and one a point for the creases'
+    edge_capacity = EDGE_PAIRS_PER_EDGE * 2 * (rows + cols) + n
+    points = np.empty(n, dtype=np.int64)
+    return Scratch(
+        np.empty((PAIRS_PER_POINT * n, 2), dtype=np.int64), np.empty(PAIRS_PER_POINT * n),
+        np.empty((edge_capacity, 2), dtype=np.int64), np.empty(edge_capacity),
+        np.empty((3, n)), points, np.empty(n, dtype=np.bool_), np.empty(n, dtype=np.int8),
+        points.copy(), points.copy(), np.empty(n), points.copy(),
+        np.empty(PAIRS_PER_POINT * n, dtype=np.int64), np.empty(n, dtype=np.bool_),
+        np.empty(n, dtype=np.bool_))
 
 
 @numba.njit(**JIT)
