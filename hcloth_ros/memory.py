@@ -18,11 +18,11 @@ small scene (interpreter, numba's compiled kernels, rclpy): 215 MB measured.
 # (the measured peaks at 22,325 points, 129 x 129 finest, rounded up by 2-5 %)
 BYTES_PER_POINT = {'multigrid': 1050, 'hierarchical': 380, 'implicit': 520,
                    'explicit': 380, 'approx': 380}
-# (2026-12-02: 351-475 B more a point with self-contact than without, the most under
-# multigrid, now that the kernel's scratch arrays, about 370 B a finest point, are kept
+# (2026-12-02: 264-390 B more a point with self-contact than without, the most under
+# multigrid, now that the kernel's scratch arrays, about 260 B a finest point, are kept
 # with its cache instead of made inside each call, where tracemalloc did not see them;
 # 189-279 on 2026-11-29, when the estimate added 290)
-SELF_CONTACT_BYTES = 490
+SELF_CONTACT_BYTES = 400
 # multigrid keeps its solved level's last solve (positions and velocities, 48 bytes a point
 # of that level; counted on every point): for newton_tolerance_steps: moved and for BDF2's
 # history (MultigridSolver._corrections_leave_history)

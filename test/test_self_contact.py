@@ -846,7 +846,7 @@ def test_resolve_passes_skip_only_pairs_nothing_moved():
         p, t = int(rng.integers(n)), int(rng.integers(2 * (rows - 1) * (cols - 1)))
         if p not in _triangle(t, cols):
             pairs.append((p, t))
-    pairs = np.array(pairs, dtype=np.int64)
+    pairs = np.array(pairs, dtype=np.int32)     # (as the scratch arrays hold them)
     sides = rng.choice([-2.0, -1.0, 1.0, 2.0], len(pairs))
     mine = [a.copy() for a in (x1, qd, qd, support)]
     mine += [np.zeros(n, dtype=np.bool_), np.full(n, -1, dtype=np.int64)]
@@ -854,12 +854,12 @@ def test_resolve_passes_skip_only_pairs_nothing_moved():
     for one_side in (False, True):
         _resolve_passes(x0, mine[0], mine[1], mine[2], inv_mass, mine[3], cols, pairs, sides,
                         len(pairs), THICKNESS, 0.3, H, one_side, mine[4],
-                        np.zeros((0, 2), dtype=np.int64), np.zeros(0), 0, UP, mine[5],
+                        np.zeros((0, 2), dtype=np.int32), np.zeros(0), 0, UP, mine[5],
                         # scratch: whatever it holds is set before it is read
-                        np.full(n, 99, dtype=np.int64), np.full(len(pairs), 7, dtype=np.int64))
+                        np.full(n, 99, dtype=np.int32), np.full(len(pairs), 7, dtype=np.int32))
         pushes = 0
         for _ in range(RESOLVE_PASSES):
-            for (p, t), side in zip(pairs, sides):
+            for (p, t), side in zip(pairs.astype(np.int64), sides):
                 if _resolve(x0, theirs[0], theirs[1], theirs[2], inv_mass, theirs[3], cols,
                             p, t, side, THICKNESS, 0.3, H, one_side):
                     pushes += 1

@@ -69,7 +69,7 @@ def compare(kernels, calls, repeats):
     for round_ in range(repeats):
         for c, arguments in enumerate(calls):
             for v in ((0, 1) if (round_ + c) % 2 == 0 else (1, 0)):
-                copies = fresh(arguments, scratch[v])
+                copies = fresh(arguments, scratch[v], kernels[v].__module__)
                 start = time.perf_counter()
                 result = kernels[v](*copies)
                 best[v, c] = min(best[v, c], time.perf_counter() - start)
@@ -104,7 +104,7 @@ def main(argv=None):
         if not calls:
             raise SystemExit(f'{path}: no calls')
         for kernel in kernels:      # compiled or loaded before the timing
-            kernel(*fresh(calls[0], takes_scratch(kernel)))
+            kernel(*fresh(calls[0], takes_scratch(kernel), kernel.__module__))
         best, digests = compare(kernels, calls, args.repeats)
         a, b = 1e3 * best.sum(axis=1)
         print(f'  A {a:.1f} ms, B {b:.1f} ms, B/A {b / a:.3f}; digests A {digests[0]}, '

@@ -186,31 +186,31 @@ def replay(calls, repeats, chained=False):
     return np.array(best), digest.hexdigest()[:12], np.array(found)
 
 
-def fresh(arguments, scratch=True):
+def fresh(arguments, scratch=True, module='hcloth_ros.core.kernels.self_contact'):
     """
     Return a call's arguments with every array copied (the kernel writes to them).
 
     The scratch arrays (whose contents no call reads before it sets them) are one set per
-    level's shape, shared by every call as a solver's are; ``scratch`` False: none, for
-    a kernel from before they were kept (:func:`takes_scratch`).
+    level's shape and kernel ``module`` (its name: the set its ``scratch`` makes),
+    shared by every call as a solver's are; ``scratch`` False: none, for a kernel from
+    before they were kept (:func:`takes_scratch`).
     """
     copies = [a.copy() if isinstance(a, np.ndarray) else a for a in arguments]
     if not scratch:
         return copies[:SCRATCH] + copies[SCRATCH + 1:]
     if copies[SCRATCH] is None:
-        copies[SCRATCH] = _scratch(copies[6].shape)
+        copies[SCRATCH] = _scratch(module, copies[6].shape)
     return copies
 
 
 _SCRATCH = {}
 
 
-def _scratch(shape):
+def _scratch(module, shape):
     """Return the scratch arrays of a level of ``shape`` (rows, cols), one set a shape."""
-    if shape not in _SCRATCH:
-        module = importlib.import_module('hcloth_ros.core.kernels.self_contact')
-        _SCRATCH[shape] = module.scratch(*shape)
-    return _SCRATCH[shape]
+    if (module, shape) not in _SCRATCH:
+        _SCRATCH[module, shape] = importlib.import_module(module).scratch(*shape)
+    return _SCRATCH[module, shape]
 
 
 def takes_scratch(kernel):

@@ -2441,7 +2441,7 @@ def _resolve_passes(x0, x1, qd, dv, inv_mass, support, cols, pairs, sides, kept,
     pushes = 0
     for _ in range(RESOLVE_PASSES):
         for e in range(kept):
-            p, t = pairs[e, 0], pairs[e, 1]
+            p, t = np.int64(pairs[e, 0]), np.int64(pairs[e, 1])     # (held in 32 bits)
             i, j, k = _triangle(t, cols)
             if checked[e] >= 0 and \
                     max(max(stamps[p], stamps[i]), max(stamps[j], stamps[k])) <= checked[e]:
@@ -2566,7 +2566,7 @@ def _rest_pairs(pairs, kept, edge_pairs, edges_kept, x, no_room, carried, inv_ma
     """Settle, for every vertex of the pairs to be pushed, whether it rests (:func:`_rests`)."""
     for e in range(kept):
         i, j, k = _triangle(pairs[e, 1], cols)
-        for v in (pairs[e, 0], i, j, k):
+        for v in (np.int64(pairs[e, 0]), i, j, k):
             _rests(v, x, no_room, carried, inv_mass, support, rows, cols, thickness, up, asked,
                    lies_on, stack)
     for e in range(edges_kept):
@@ -2901,17 +2901,23 @@ Scratch = collections.namedtuple('Scratch', (
 
 
 def scratch(rows, cols):
-    """Return the :class:`Scratch` arrays of a level of ``rows`` x ``cols`` points."""
+    """
+    Return the :class:`Scratch` arrays of a level of ``rows`` x ``cols`` points.
+
+    The pairs, the edge pairs, the stamps and the pairs' checks in 32-bit integers (a
+    level's triangles and a call's pushes stay far below 2**31): half of the 64-bit ones'
+    memory, the pairs' capacity most of it.
+    """
     n = rows * cols
     # free edges' pairs, and one a point for the creases'
     edge_capacity = EDGE_PAIRS_PER_EDGE * 2 * (rows + cols) + n
     points = np.empty(n, dtype=np.int64)
     return Scratch(
-        np.empty((PAIRS_PER_POINT * n, 2), dtype=np.int64), np.empty(PAIRS_PER_POINT * n),
-        np.empty((edge_capacity, 2), dtype=np.int64), np.empty(edge_capacity),
+        np.empty((PAIRS_PER_POINT * n, 2), dtype=np.int32), np.empty(PAIRS_PER_POINT * n),
+        np.empty((edge_capacity, 2), dtype=np.int32), np.empty(edge_capacity),
         np.empty((3, n)), points, np.empty(n, dtype=np.bool_), np.empty(n, dtype=np.int8),
-        points.copy(), points.copy(), np.empty(n), points.copy(),
-        np.empty(PAIRS_PER_POINT * n, dtype=np.int64), np.empty(n, dtype=np.bool_),
+        points.copy(), points.copy(), np.empty(n), np.empty(n, dtype=np.int32),
+        np.empty(PAIRS_PER_POINT * n, dtype=np.int32), np.empty(n, dtype=np.bool_),
         np.empty(n, dtype=np.bool_))
 
 
