@@ -272,7 +272,7 @@ def test_the_scratch_arrays_carry_nothing_from_one_call_to_the_next():
     memory afresh; what one call leaves in them must not reach the next. The pressed
     layers' call (pairs found and pushed: every array used), once with new arrays and
     once with arrays full of NaN, -7 and True; and a scratch of another level's size is
-    refused before anything moves.
+    refused before anything moves, by ``carry`` and ``settle`` too.
     """
     lv, start, end, qd, _ = _pressed_layers(approach=0.3)
     outcomes = []
@@ -298,6 +298,12 @@ def test_the_scratch_arrays_carry_nothing_from_one_call_to_the_next():
                              np.zeros(lv.shape, dtype=np.int8),
                              np.ones(lv.shape, dtype=np.bool_), _no_support(lv), THICKNESS,
                              0.3, 4, H, 10.0, UP, *cache, BOXES_NEW, CREASE_ANGLE)
+    hold = np.zeros(lv.shape, dtype=np.int8)
+    with pytest.raises(ValueError, match='scratch arrays do not fit'):
+        carry(mine, qd.copy(), np.zeros_like(end), start, lv.mass, hold, _no_support(lv),
+              cache[-1], UP, THICKNESS, 0.3, H, cache[9])
+    with pytest.raises(ValueError, match='scratch arrays do not fit'):
+        kernels.settle(mine, lv.mass, hold, _no_support(lv), THICKNESS, 4, *cache)
     assert np.array_equal(mine, end)
 
 

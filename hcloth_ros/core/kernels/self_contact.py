@@ -2304,8 +2304,7 @@ def self_contact(
     crease_cosine = _crease_cosine(thickness, start_edge[0], crease_angle)
     # the first detection tests only round the points marked moved (the caller's: those
     # that moved since its last call's first detection)
-    if scratch.fresh.shape[0] != n or scratch.pairs.shape[0] != PAIRS_PER_POINT * n:
-        raise ValueError('self_contact: the scratch arrays do not fit the level')
+    _check_scratch(scratch, n)
     fresh = scratch.fresh
     fresh[:] = moved.reshape(n)
     fresh_blocks = _fresh_blocks(fresh, rows, cols)
@@ -2684,6 +2683,7 @@ def carry(q, qd, dv, q_prev, mass, hold_kind, support, carried, up, thickness, f
         return 0
     x1, x0 = q.reshape((3, n)), q_prev.reshape((3, n))
     qdf, dvf, held_up = qd.reshape((3, n)), dv.reshape((3, n)), support.reshape((4, n))
+    _check_scratch(scratch, n)
     inv_mass, waiting = scratch.inv_mass, scratch.waiting
     _inverse_masses(mass, hold_kind, inv_mass)
     waiting[:] = False
@@ -2855,6 +2855,7 @@ def settle(q, mass, hold_kind, support, thickness, iterations, boxes, ends, cone
     # no creases: they are tested for crossings alone, and nothing moves here (a bound
     # would cost a pass over the level for edge tests that cannot find a pair)
     crease_cosine = -1.0
+    _check_scratch(scratch, n)
     fresh = scratch.fresh
     fresh[:] = True
     fresh_blocks = _fresh_blocks(fresh, rows, cols)
@@ -2898,6 +2899,17 @@ def patch_cache(rows, cols):
 Scratch = collections.namedtuple('Scratch', (
     'pairs', 'sides', 'edge_pairs', 'edge_sides', 'x_rest', 'lay', 'no_room', 'asked',
     'lies_on', 'stack', 'inv_mass', 'stamps', 'checked', 'fresh', 'waiting'))
+
+
+@numba.njit(**JIT)
+def _check_scratch(scratch, n):
+    """
+    Refuse scratch arrays made for a level of other than ``n`` points.
+
+    The kernels do not test their indices: arrays too small would be written past.
+    """
+    if scratch.fresh.shape[0] != n or scratch.pairs.shape[0] != PAIRS_PER_POINT * n:
+        raise ValueError('self_contact: the scratch arrays do not fit the level')
 
 
 def scratch(rows, cols):
