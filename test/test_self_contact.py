@@ -275,18 +275,22 @@ def test_the_scratch_arrays_carry_nothing_from_one_call_to_the_next():
     refused before anything moves, by ``carry`` and ``settle`` too.
     """
     lv, start, end, qd, _ = _pressed_layers(approach=0.3)
-    outcomes = []
-    for spoil in (False, True):
-        cache = list(patch_cache(*lv.shape))
-        if spoil:
-            cache[9] = _spoilt(cache[9])
-        mine, velocity, dv = end.copy(), qd.copy(), np.zeros_like(end)
+
+    def call(cache, mine):
+        velocity, dv = qd.copy(), np.zeros_like(end)
         result = kernels.self_contact(mine, velocity, dv, start, start, lv.mass,
                                       np.zeros(lv.shape, dtype=np.int8),
                                       np.ones(lv.shape, dtype=np.bool_), _no_support(lv),
                                       THICKNESS, 0.3, 4, H, 10.0, UP, *cache, BOXES_NEW,
                                       CREASE_ANGLE)
-        outcomes.append((mine, velocity, dv, result))
+        return mine, velocity, dv, result
+
+    outcomes = []
+    for spoil in (False, True):
+        cache = list(patch_cache(*lv.shape))
+        if spoil:
+            cache[9] = _spoilt(cache[9])
+        outcomes.append(call(cache, end.copy()))
     assert outcomes[0][3][0] > 100
     for a, b in zip(*outcomes):
         assert np.array_equal(a, b)
@@ -294,10 +298,7 @@ def test_the_scratch_arrays_carry_nothing_from_one_call_to_the_next():
     cache[9] = scratch(lv.shape[0] + 1, lv.shape[1])
     mine = end.copy()
     with pytest.raises(ValueError, match='scratch arrays do not fit'):
-        kernels.self_contact(mine, qd.copy(), np.zeros_like(end), start, start, lv.mass,
-                             np.zeros(lv.shape, dtype=np.int8),
-                             np.ones(lv.shape, dtype=np.bool_), _no_support(lv), THICKNESS,
-                             0.3, 4, H, 10.0, UP, *cache, BOXES_NEW, CREASE_ANGLE)
+        call(cache, mine)
     hold = np.zeros(lv.shape, dtype=np.int8)
     with pytest.raises(ValueError, match='scratch arrays do not fit'):
         carry(mine, qd.copy(), np.zeros_like(end), start, lv.mass, hold, _no_support(lv),

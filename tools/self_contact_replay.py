@@ -195,7 +195,7 @@ def fresh(arguments, scratch=True, module='hcloth_ros.core.kernels.self_contact'
     shared by every call as a solver's are; ``scratch`` False: none, for a kernel from
     before they were kept (:func:`takes_scratch`).
     """
-    copies = [a.copy() if isinstance(a, np.ndarray) else a for a in arguments]
+    copies = _copied(arguments)
     if not scratch:
         return copies[:SCRATCH] + copies[SCRATCH + 1:]
     if copies[SCRATCH] is None:
@@ -220,9 +220,14 @@ def takes_scratch(kernel):
 
 def kept_copy(arguments):
     """Return a call's arguments copied to be kept, its scratch arrays left out (None)."""
-    copies = [a.copy() if isinstance(a, np.ndarray) else a for a in arguments]
+    copies = _copied(arguments)
     copies[SCRATCH] = None
     return copies
+
+
+def _copied(arguments):
+    """Return a call's arguments with every array copied."""
+    return [a.copy() if isinstance(a, np.ndarray) else a for a in arguments]
 
 
 def add_to_digest(digest, copies, result):
