@@ -23,7 +23,10 @@ Why in one process: the machines these sessions run on drift by up to 2x in spee
 minutes, so two replays run one after the other differed by more than the changes measured
 (5 % and less). Taking turns call by call puts both versions under the same drift: the
 same comparison repeated within 2 %, and a version against a copy of itself gave
-1.004-1.007 (2026-12-01, session 40).
+1.004-1.007 (2026-12-01, session 40). Each version's scratch arrays come as an instance of
+one class (``self_contact_replay._scratch``): with each module's own ``Scratch``, numba's
+dispatcher sent every call of the second version down its slow path, and a version timed
+2.7-2.9 times a copy of itself (session 48; with that, 1.02-1.03).
 """
 
 import argparse

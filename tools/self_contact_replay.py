@@ -204,13 +204,37 @@ def fresh(arguments, scratch=True, module='hcloth_ros.core.kernels.self_contact'
 
 
 _SCRATCH = {}
+_SCRATCH_CLASSES = {}
 
 
 def _scratch(module, shape):
-    """Return the scratch arrays of a level of ``shape`` (rows, cols), one set a shape."""
+    """
+    Return the scratch arrays of a level of ``shape`` (rows, cols), one set a shape.
+
+    Made by ``module``'s ``scratch``, as an instance of the first class of that name and
+    those fields' types that was made (:func:`_as_first_class`).
+    """
     if (module, shape) not in _SCRATCH:
-        _SCRATCH[module, shape] = importlib.import_module(module).scratch(*shape)
+        made = importlib.import_module(module).scratch(*shape)
+        _SCRATCH[module, shape] = _as_first_class(made)
     return _SCRATCH[module, shape]
+
+
+def _as_first_class(made):
+    """
+    Return the named tuple ``made`` as an instance of the first class like it.
+
+    Two versions of the kernel each define a class ``Scratch``; where their fields had the
+    same types, numba's dispatcher took both classes for one in its fast path and found no
+    compiled kernel for the second version, whose every call then went the slow way
+    (typing each argument in Python): about 1 ms more a call, so that a version against a
+    copy of itself timed B/A 2.7-2.9 in ``tools/self_contact_ab.py`` (session 48). The
+    kernels read the fields by name, so one class serves both.
+    """
+    key = (type(made).__name__, made._fields,
+           tuple((f.dtype.str, f.ndim) for f in made))
+    first = _SCRATCH_CLASSES.setdefault(key, type(made))
+    return made if first is type(made) else first(*made)
 
 
 def takes_scratch(kernel):
